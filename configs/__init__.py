@@ -1,0 +1,1 @@
+"""The shipped default configs, installed as `diffsense._configs` (see pyproject.toml)."""

@@ -1,0 +1,1 @@
+"""diffsense.objective (being built)."""

@@ -1,0 +1,1 @@
+"""diffsense.predict (being built)."""

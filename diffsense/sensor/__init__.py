@@ -1,0 +1,1 @@
+"""diffsense.sensor (being built)."""

@@ -1,0 +1,1 @@
+"""diffsense.solve (being built)."""

@@ -1,0 +1,1 @@
+"""diffsense.tracks (being built)."""
