@@ -1,0 +1,163 @@
+"""From a scene and a sensor's detections to what the CS-LSTM eats.
+
+For every prediction instant t (a 10 Hz frame index) and the scene's vehicles:
+
+1. Every measured point of the 3 s history window (frames t-30 .. t) is expressed in the
+   target's road-aligned frame at t: origin at the target's ground-truth position at t, axes
+   (lon forward, lat left) rotated by the road angle there (the paper's preprocessing).
+2. The fill policy (`_fill.py`) turns missed detections into expected points.
+3. The window is downsampled to 5 Hz: 16 points, the last one at t.
+4. Neighbours are placed in the 13 x 3 social grid by their ground-truth lane and longitudinal
+   offset at t; the grid occupancy of a neighbour is the probability that the sensor has it at
+   all (detected at t for `zero`, detected at least once in the window for `hold`/`interp`).
+
+Ground-truth inputs are the same code with p = 1 and no noise (`ground_truth_detections`).
+The origin is the target's ground-truth pose for both inputs, so the two predictions are directly
+comparable and a missing point under `zero` sits exactly at the target, as in the paper.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from diffsense.scene import TARGET_INDEX, Scene
+from diffsense.sensor._datatypes import Detections
+from diffsense.tracks._fill import FillPolicy, fill_window
+
+HISTORY_POINTS = 16
+FUTURE_POINTS = 25
+FRAMES_PER_POINT = 2  # 10 Hz scene -> 5 Hz predictor
+HISTORY_FRAMES = (HISTORY_POINTS - 1) * FRAMES_PER_POINT  # 30 frames = 3 s before t
+FUTURE_FRAMES = FUTURE_POINTS * FRAMES_PER_POINT  # 50 frames = 5 s after t
+GRID_CELL_M = 15.0 * 0.3048  # 15 ft cells of the NGSIM social grid
+GRID_CELLS = 13  # longitudinal cells, centres -90 .. +90 ft
+GRID_LANES = 3  # left, own, right
+GRID_SIZE = GRID_CELLS * GRID_LANES
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class PredictorInputs:
+    """A batch of predictor inputs in SI, target road-aligned frame (lon forward, lat left).
+
+    Attributes:
+        hist: [B, 16, 2] target history [m].
+        nbr_hist: [B, M, 16, 2] histories of the M candidate neighbours [m].
+        nbr_slot: [B, M] grid id (lane * 13 + cell, lane 0 = left); 0 where not in the grid.
+        nbr_weight: [B, M] grid occupancy in [0, 1]; 0 where not in the grid.
+    """
+
+    hist: Float[Array, "B 16 2"]
+    nbr_hist: Float[Array, "B M 16 2"]
+    nbr_slot: Int[Array, "B M"]
+    nbr_weight: Float[Array, "B M"]
+
+
+def prediction_frames(num_frames: int, stride_frames: int = FRAMES_PER_POINT) -> np.ndarray:
+    """Frame indices with a full 3 s history and 5 s future, every `stride_frames` [-]."""
+    last = num_frames - 1 - FUTURE_FRAMES
+    if last < HISTORY_FRAMES:
+        raise ValueError(
+            f"a scene of {num_frames} frames is too short for a 3 s history and 5 s future "
+            f"(needs at least {HISTORY_FRAMES + FUTURE_FRAMES + 1})"
+        )
+    return np.arange(HISTORY_FRAMES, last + 1, stride_frames, dtype=np.int32)
+
+
+def ground_truth_detections(scene: Scene) -> Detections:
+    """A perfect sensor: every present vehicle detected at its true position."""
+    p = jnp.broadcast_to(scene.present[..., None, :], scene.x_m.shape).astype(scene.x_m.dtype)
+    return Detections(p_detect=p, x_m=scene.x_m, y_m=scene.y_m)
+
+
+def _target_pose(scene: Scene, frames: Int[Array, " I"]):
+    x0 = scene.x_m[frames, TARGET_INDEX]
+    y0 = scene.y_m[frames, TARGET_INDEX]
+    theta = scene.road_angle_rad[frames, TARGET_INDEX]
+    return x0, y0, theta
+
+
+def _to_target_frame(x, y, x0, y0, theta) -> Float[Array, "... 2"]:
+    """World points -> (lon, lat) relative to (x0, y0), rotated by -theta; x0.. broadcast."""
+    dx, dy = x - x0, y - y0
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    return jnp.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+
+
+def _windows(frames: Int[Array, " I"], offsets: np.ndarray) -> Int[Array, "I W"]:
+    return frames[:, None] + jnp.asarray(offsets)[None, :]
+
+
+def grid_slots(scene: Scene, frames: Int[Array, " I"]) -> tuple[Int[Array, "I V"], Array]:
+    """Grid id of every vehicle around the target at each instant, and whether it is in the grid.
+
+    Lane from the ground-truth lane index (lane 0 = rightmost, so the target's left lane is
+    lane + 1); cell from the longitudinal offset along the road, rounded to 15 ft cells.
+    """
+    lane = scene.lane[frames]  # [I, V]
+    ds = scene.s_m[frames] - scene.s_m[frames, TARGET_INDEX][:, None]
+    lane_offset = lane - lane[:, TARGET_INDEX][:, None]  # +1 = one lane to the left
+    grid_lane = 1 - lane_offset  # 0 left, 1 own, 2 right
+    cell = jnp.round(ds / GRID_CELL_M).astype(jnp.int32) + GRID_CELLS // 2
+    vehicle = jnp.arange(scene.num_vehicles)
+    inside = (
+        (jnp.abs(lane_offset) <= 1)
+        & (cell >= 0)
+        & (cell < GRID_CELLS)
+        & scene.present[None, :]
+        & (vehicle != TARGET_INDEX)[None, :]
+    )
+    slot = jnp.where(inside, grid_lane * GRID_CELLS + cell, 0).astype(jnp.int32)
+    return slot, inside
+
+
+def build_inputs(scene: Scene, det: Detections, frames: Int[Array, " I"], fill: FillPolicy) -> PredictorInputs:
+    """Predictor inputs at each prediction instant of one scene (arrays [T, V]).
+
+    `det` may carry soft probabilities (expected histories) or 0/1 detections (hard histories).
+    Neighbour candidates are all vehicles but the target (M = V - 1), in vehicle order.
+    """
+    frames = jnp.asarray(frames)
+    x0, y0, theta = _target_pose(scene, frames)
+    window = _windows(frames, np.arange(-HISTORY_FRAMES, 1))  # [I, W]
+    # [I, W, V, 2] measured points in the target frame, and [I, W, V] probabilities.
+    z = _to_target_frame(
+        det.x_m[window], det.y_m[window], x0[:, None, None], y0[:, None, None], theta[:, None, None]
+    )
+    p = det.p_detect[window]
+    # Fill along the window axis: put it next to the coordinate axis.
+    z = jnp.swapaxes(z, 1, 2)  # [I, V, W, 2]
+    p = jnp.swapaxes(p, 1, 2)  # [I, V, W]
+    filled = fill_window(z, p, fill)[:, :, ::FRAMES_PER_POINT]  # [I, V, 16, 2]
+    if fill == "zero":
+        seen = p[..., -1]
+    else:
+        seen = 1.0 - jnp.prod(1.0 - p, axis=-1)  # detected at least once in the window
+    slot, inside = grid_slots(scene, frames)
+    others = np.array([v for v in range(scene.num_vehicles) if v != TARGET_INDEX], dtype=np.int32)
+    return PredictorInputs(
+        hist=filled[:, TARGET_INDEX],
+        nbr_hist=filled[:, others],
+        nbr_slot=slot[:, others],
+        nbr_weight=jnp.where(inside[:, others], seen[:, others], 0.0),
+    )
+
+
+def true_future(scene: Scene, frames: Int[Array, " I"]) -> Float[Array, "I 25 2"]:
+    """The target's true future (0.2 .. 5 s) in its road-aligned frame at each instant [m]."""
+    frames = jnp.asarray(frames)
+    x0, y0, theta = _target_pose(scene, frames)
+    window = _windows(frames, np.arange(FRAMES_PER_POINT, FUTURE_FRAMES + 1, FRAMES_PER_POINT))
+    xs = scene.x_m[window, TARGET_INDEX]
+    ys = scene.y_m[window, TARGET_INDEX]
+    return _to_target_frame(xs, ys, x0[:, None], y0[:, None], theta[:, None])
+
+
+def flatten_instants(inputs: PredictorInputs) -> PredictorInputs:
+    """Merge the leading (scene, instant) axes [N, I, ...] into one batch axis [N*I, ...]."""
+    return jax.tree.map(lambda a: a.reshape((-1,) + a.shape[2:]), inputs)
