@@ -1,0 +1,79 @@
+"""E_RMSE(r) on a stand-in sensor and predictor: values, gradients, estimators, horizons."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense.objective import EstimatorConfig, make_objective
+from diffsense.tracks import prediction_frames
+from tests._toy_pipeline import toy_detect, toy_predict, toy_scenes
+
+
+@pytest.fixture(scope="module")
+def objective():
+    scenes, scenario = toy_scenes()
+    frames = prediction_frames(scenes.num_frames)
+    return make_objective(scenes, scenario, frames, toy_detect(), toy_predict, fill="hold")
+
+
+def test_blind_sensor_is_penalised(objective):
+    blind = objective.e_hard(0.5)
+    seeing = objective.e_hard(150.0)
+    assert blind > seeing > 0.0
+    assert np.isfinite(blind)
+
+
+def test_gradient_matches_central_differences(objective):
+    for r in (30.0, 55.0):
+        value, grad = objective.e2_and_grad(r, 1.0)
+        h = 1e-4
+        fd = (objective.e2_soft(r + h) - objective.e2_soft(r - h)) / (2 * h)
+        assert np.isfinite(float(grad))
+        np.testing.assert_allclose(float(grad), float(fd), rtol=1e-5, atol=1e-9)
+        np.testing.assert_allclose(float(value), float(objective.e2_soft(r)), rtol=1e-12)
+
+
+def test_soft_tends_to_hard_as_temperature_shrinks(objective):
+    r = 47.3
+    hard = objective.e_hard(r) ** 2
+    gaps = [abs(float(objective.e2_soft(r, tau)) - hard) for tau in (1.0, 0.1, 1e-3)]
+    assert gaps[-1] < 1e-6 * max(hard, 1.0)
+    assert gaps[-1] <= gaps[0]
+
+
+def test_deterministic(objective):
+    assert float(objective.e2_soft(40.0)) == float(objective.e2_soft(40.0))
+
+
+def test_horizon_rmse_shapes_and_growth(objective):
+    gt, sensor = objective.horizon_rmse(30.0, mode="hard")
+    assert gt.shape == (2, 25) and sensor.shape == (2, 25)
+    assert np.all(np.isfinite(gt)) and np.all(np.isfinite(sensor))
+    assert sensor[:, -1].mean() > sensor[:, 0].mean()
+
+
+def test_monte_carlo_estimator_is_deterministic_and_differentiable():
+    scenes, scenario = toy_scenes(n=2)
+    frames = prediction_frames(scenes.num_frames)[:4]
+    mc = make_objective(scenes, scenario, frames, toy_detect(), toy_predict, fill="interp",
+                        estimator=EstimatorConfig(kind="mc", samples=3, relax_temperature=0.3),
+                        key=jax.random.PRNGKey(1))
+    v1, g1 = mc.e2_and_grad(40.0)
+    v2, g2 = mc.e2_and_grad(40.0)
+    assert float(v1) == float(v2) and float(g1) == float(g2)
+    assert np.isfinite(float(g1))
+    h = 1e-4
+    fd = (mc.e2_soft(40.0 + h) - mc.e2_soft(40.0 - h)) / (2 * h)
+    np.testing.assert_allclose(float(g1), float(fd), rtol=1e-5, atol=1e-9)
+
+
+def test_estimator_config_rejects_bad_values():
+    from diffsense.errors import InputError
+
+    with pytest.raises(InputError, match="unknown estimator"):
+        EstimatorConfig(kind="exact")
+    with pytest.raises(InputError, match="samples"):
+        EstimatorConfig(kind="mc", samples=0)
