@@ -1,1 +1,48 @@
-"""diffsense.solve (being built)."""
+"""Solve: the stepped sweep, the continuous argmin of E(r), dr*/dtheta, the dense baseline.
+
+    sweep, default_steps         the paper's discrete grid, hard and soft (the cross-check)
+    solve, SolveConfig           bracket from the best step, optimistix refinement with
+                                 temperature continuation, answer chosen on the hard objective
+    argmin, argmin_derivative    dr*/dtheta by the implicit function theorem (optimistix
+                                 ImplicitAdjoint, or the explicit formula); zero on a bound
+    dense_grid_search, basin_check   the brute-force baseline and its basin cross-check
+
+Objective protocol: `e2_soft(r, tau) -> E^2 [m^2]` (jax-differentiable in r; tau = 1 is the
+sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, both pure.
+"""
+
+from diffsense.solve._bracketed import BracketedSecant
+from diffsense.solve._continuous import LevelResult, SolveConfig, SolveResult, solve
+from diffsense.solve._dense import DenseGrid, basin_check, dense_grid_search
+from diffsense.solve._implicit import argmin, argmin_derivative
+from diffsense.solve._steps import (
+    PAPER_HFOV_STEPS_DEG,
+    SweepPoint,
+    best_step,
+    bracket_around,
+    check_interval,
+    check_steps,
+    default_steps,
+    sweep,
+)
+
+__all__ = [
+    "PAPER_HFOV_STEPS_DEG",
+    "BracketedSecant",
+    "DenseGrid",
+    "LevelResult",
+    "SolveConfig",
+    "SolveResult",
+    "SweepPoint",
+    "argmin",
+    "argmin_derivative",
+    "basin_check",
+    "best_step",
+    "bracket_around",
+    "check_interval",
+    "check_steps",
+    "default_steps",
+    "dense_grid_search",
+    "solve",
+    "sweep",
+]

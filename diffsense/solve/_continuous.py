@@ -1,0 +1,335 @@
+"""The continuous solve: the best r over an interval, refined from the stepped sweep.
+
+Strategy (DESIGN.md, "The solver"):
+1. the sweep's best step on the HARD objective gives a bracket: its neighbouring steps;
+2. inside the bracket, the minimum of the SOFT objective E^2(r, tau) is found as the root of
+   dE^2/dr with optimistix (`BracketedSecant`, or `optx.Bisection`), for each temperature of a
+   continuation schedule, largest first, each level warm-started from the one before;
+3. the final answer is chosen by the HARD objective: the soft optimum is kept when it is at
+   least as good as the best step, otherwise the other candidates (earlier levels' optima, the
+   best step itself) are compared and `notes` says why the answer is not the soft optimum. So
+   E_hard(r*) <= min over steps of E_hard always holds.
+
+E^2 is optimised (the gradient of sqrt is NaN at 0); E = sqrt(E^2) is reported. Every objective
+and gradient evaluation of step 2-3 is counted against `SolveConfig.max_evaluations`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+
+from diffsense.errors import InputError
+from diffsense.solve._bracketed import BracketedSecant
+from diffsense.solve._steps import (
+    SweepPoint,
+    best_step,
+    bracket_around,
+    check_interval,
+    check_steps,
+    default_steps,
+    sweep,
+)
+
+# Gradient evaluations kept back per later continuation level, so an early level cannot spend
+# the whole budget.
+_RESERVE_PER_LEVEL = 3
+
+
+@dataclasses.dataclass(frozen=True)
+class SolveConfig:
+    """Settings of the continuous solve (a config section; loadable with diffsense.config).
+
+    Attributes:
+        tau_schedule: temperature multipliers of the continuation, largest first; the last is
+            the one the soft objective is reported at (1.0 = the sensors' documented defaults).
+        xtol_rel: tolerance on r at the last level, relative to the interval width (earlier
+            levels use it scaled by tau / tau_last).
+        max_evaluations: budget of the continuous solve: objective (soft and hard) plus
+            gradient evaluations (the issue's budget is 20).
+        dtype: float type of the outer problem (r, tau).
+        method: `secant` (BracketedSecant, warm-started) or `bisection` (optx.Bisection on
+            the whole bracket at every level).
+    """
+
+    tau_schedule: tuple[float, ...] = (4.0, 2.0, 1.0)
+    xtol_rel: float = 1e-3
+    max_evaluations: int = 20
+    dtype: Literal["float64", "float32"] = "float64"
+    method: Literal["secant", "bisection"] = "secant"
+
+    def __post_init__(self):
+        taus = tuple(self.tau_schedule)
+        if not taus or any(not (math.isfinite(t) and t > 0) for t in taus):
+            raise InputError(f"tau_schedule {taus} must be positive finite numbers")
+        if any(b > a for a, b in zip(taus, taus[1:])):
+            raise InputError(f"tau_schedule {taus} must not increase (largest first)")
+        if not (0 < self.xtol_rel < 0.5):
+            raise InputError(f"xtol_rel {self.xtol_rel} must lie in (0, 0.5)")
+        if self.max_evaluations < 2 * len(taus) + 2:
+            raise InputError(
+                f"max_evaluations {self.max_evaluations} is too small for "
+                f"{len(taus)} temperature levels (need at least {2 * len(taus) + 2})"
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class LevelResult:
+    """One temperature level of the continuation.
+
+    Attributes:
+        tau: the temperature multiplier.
+        r: the soft optimum found at this temperature.
+        gradient_evaluations: dE^2/dr evaluations spent on this level.
+        bound: -1 / +1 if the minimum is on the bracket's lower / upper edge, 0 inside.
+        converged: False if the level ran out of its share of the budget.
+    """
+
+    tau: float
+    r: float
+    gradient_evaluations: int
+    bound: int
+    converged: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class SolveResult:
+    """What the solve found.
+
+    Attributes:
+        r_star: the answer (the objective's units).
+        E_soft_star: sqrt(E^2_soft(r_star, tau_last)) [m].
+        E_hard_star: E_hard(r_star) [m]; never above the best step's E_hard.
+        sweep: the stepped sweep (its own evaluations are not in `evaluations`).
+        evaluations: {"objective": soft + hard objective evaluations, "gradient": dE^2/dr
+            evaluations} of the continuous solve (steps 2-3 of the module docstring).
+        on_bound: r_star is an end of the interval (its implicit derivative is zero).
+        bracket: (lo, hi) the continuous solve searched in.
+        tau_schedule: the temperatures used, largest first.
+        levels: per-temperature results.
+        notes: human-readable remarks (why the answer is not the soft optimum, budget, ...).
+        interval: the whole parameter interval (lo, hi).
+        wall_s: {"sweep": s, "solve": s} wall time of the two phases (compilation included).
+    """
+
+    r_star: float
+    E_soft_star: float
+    E_hard_star: float
+    sweep: tuple[SweepPoint, ...]
+    evaluations: dict[str, int]
+    on_bound: bool
+    bracket: tuple[float, float]
+    tau_schedule: tuple[float, ...]
+    levels: tuple[LevelResult, ...]
+    notes: tuple[str, ...]
+    interval: tuple[float, float]
+    wall_s: dict[str, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        """A plain, JSON-ready dict of every field."""
+        return dataclasses.asdict(self)
+
+
+def _outer_dtype(name: str) -> Any:
+    if name == "float64" and not jax.config.jax_enable_x64:
+        raise InputError("the float64 outer solve needs jax_enable_x64 (or set dtype = float32)")
+    return jnp.dtype(name)
+
+
+def _e_from_e2(e2: Any) -> float:
+    return math.sqrt(max(float(e2), 0.0))
+
+
+class _Counted:
+    """Objective and gradient callables that count their evaluations (Python side)."""
+
+    def __init__(self, e2_soft, e_hard, dtype):
+        self.dtype = dtype
+        self._e2 = e2_soft
+        self._e_hard = e_hard
+        self._grad = jax.jit(jax.grad(e2_soft))
+        self.objective = 0
+        self.gradient = 0
+
+    def as_r(self, r: float) -> jax.Array:
+        return jnp.asarray(r, self.dtype)
+
+    def e2(self, r: float, tau: float) -> float:
+        self.objective += 1
+        return float(self._e2(self.as_r(r), self.as_r(tau)))
+
+    def hard(self, r: float) -> float:
+        self.objective += 1
+        return float(self._e_hard(self.as_r(r)))
+
+    def grad(self, r: float, tau: float) -> float:
+        self.gradient += 1
+        return float(self._grad(self.as_r(r), self.as_r(tau)))
+
+
+def _level_secant(g, counted, y0, tau, lower, upper, probe, tol, max_steps):
+    solver = BracketedSecant(rtol=0.0, atol=tol)
+    sol = optx.root_find(
+        g,
+        solver,
+        counted.as_r(y0),
+        args=counted.as_r(tau),
+        options=dict(lower=counted.as_r(lower), upper=counted.as_r(upper), probe=counted.as_r(probe)),
+        max_steps=max_steps,
+        throw=False,
+    )
+    n = int(sol.stats["num_steps"])
+    counted.gradient += n
+    if bool(sol.state.nonfinite):
+        raise FloatingPointError(f"dE^2/dr is not finite near r={float(sol.value)} (tau={tau})")
+    return float(sol.value), n, int(sol.state.bound), bool(sol.state.done)
+
+
+def _level_bisection(g, counted, y0, tau, lower, upper, tol, max_steps):
+    before = counted.gradient
+    g_lo, g_hi = counted.grad(lower, tau), counted.grad(upper, tau)
+    if not (math.isfinite(g_lo) and math.isfinite(g_hi)):
+        raise FloatingPointError(f"dE^2/dr is not finite on the bracket [{lower}, {upper}]")
+    if g_lo >= 0 or g_hi <= 0:
+        if g_lo >= 0 and g_hi <= 0:  # a maximum inside: the better end wins
+            lower_wins = counted.e2(lower, tau) <= counted.e2(upper, tau)
+        else:
+            lower_wins = g_lo >= 0
+        return (lower, -1) if lower_wins else (upper, 1), counted.gradient - before, True
+
+    # optx.Bisection only reads the sign of fn and also demands |fn| < atol to stop: squash g
+    # into (-tol/2, tol/2) keeping its sign, so the interval width alone decides.
+    def squashed(r, tau_):
+        grad = g(r, tau_)
+        return 0.5 * tol * grad / (1.0 + jnp.abs(grad))
+
+    sol = optx.root_find(
+        squashed,
+        optx.Bisection(rtol=0.0, atol=tol, flip=False),
+        counted.as_r(min(max(y0, lower), upper)),
+        args=counted.as_r(tau),
+        options=dict(lower=counted.as_r(lower), upper=counted.as_r(upper)),
+        max_steps=max(max_steps - 2, 1),  # the two end evaluations above count too
+        throw=False,
+    )
+    counted.gradient += int(sol.stats["num_steps"])
+    done = int(sol.result == optx.RESULTS.successful)
+    return (float(sol.value), 0), counted.gradient - before, bool(done)
+
+
+def solve(
+    e2_soft: Callable[[Any, Any], Any],
+    e_hard: Callable[[Any], Any],
+    interval: tuple[float, float],
+    *,
+    steps: Sequence[float] | None = None,
+    config: SolveConfig = SolveConfig(),
+    sweep_points: Sequence[SweepPoint] | None = None,
+) -> SolveResult:
+    """Find argmin_r E over `interval`: stepped sweep, then the continuous solve (module doc).
+
+    Args:
+        e2_soft: `e2_soft(r, tau) -> E^2 [m^2]`, pure, differentiable in r with jax.grad.
+        e_hard: `e_hard(r) -> E [m]`, pure, piecewise constant, no gradient needed.
+        interval: (lo, hi) in the objective's units.
+        steps: the sweep's steps (default: `default_steps(lo, hi)`).
+        config: solver settings.
+        sweep_points: an already evaluated sweep (then `steps` is ignored).
+
+    Returns:
+        A SolveResult. Raises InputError on a bad interval/steps/config and FloatingPointError
+        if the objective's gradient is not finite.
+    """
+    lo, hi = check_interval(*interval)
+    dtype = _outer_dtype(config.dtype)
+    taus = tuple(float(t) for t in config.tau_schedule)
+    t0 = time.perf_counter()
+    if sweep_points is None:
+        grid = check_steps(default_steps(lo, hi) if steps is None else steps, lo, hi)
+        sweep_points = sweep(
+            lambda r: e_hard(jnp.asarray(r, dtype)),
+            lambda r, tau: e2_soft(jnp.asarray(r, dtype), jnp.asarray(tau, dtype)),
+            grid,
+            tau=taus[-1],
+        )
+    sweep_points = tuple(sweep_points)
+    t1 = time.perf_counter()
+
+    k = best_step(sweep_points)
+    best = sweep_points[k]
+    lower, upper = bracket_around(sweep_points, k, lo, hi)
+    counted = _Counted(e2_soft, e_hard, dtype)
+    xtol = config.xtol_rel * (hi - lo)
+    notes: list[str] = []
+
+    def g(r, tau):
+        return jax.grad(e2_soft)(r, tau)
+
+    levels: list[LevelResult] = []
+    y, probe = best.r, 0.25 * (upper - lower)
+    for i, tau in enumerate(taus):
+        tol = min(xtol * tau / taus[-1], 0.125 * (upper - lower))
+        used = counted.objective + counted.gradient
+        later = len(taus) - 1 - i
+        max_steps = config.max_evaluations - used - 2 - _RESERVE_PER_LEVEL * later
+        if max_steps < 1:
+            notes.append(f"budget spent before tau={tau:g}: continuation stopped early")
+            break
+        if config.method == "secant":
+            r, n, bound, done = _level_secant(g, counted, y, tau, lower, upper, probe, tol, max_steps)
+        else:
+            (r, bound), n, done = _level_bisection(g, counted, y, tau, lower, upper, tol, max_steps)
+        if not done:
+            notes.append(f"tau={tau:g}: stopped after {n} gradient evaluations (budget share)")
+        probe = max(2.0 * tol, abs(r - y)) if levels else max(2.0 * tol, 0.0625 * (upper - lower))
+        y = r
+        levels.append(LevelResult(tau=tau, r=r, gradient_evaluations=n, bound=bound, converged=done))
+
+    r_soft = levels[-1].r if levels else best.r
+    last = levels[-1] if levels else None
+    if last is not None and last.bound != 0 and r_soft not in (lo, hi):
+        notes.append(
+            f"the soft minimum at tau={last.tau:g} presses on the bracket edge r={r_soft:.6g}: "
+            f"beyond it the sweep's hard objective is worse than at the best step r={best.r:.6g}"
+        )
+    r_star, e_hard_star = r_soft, counted.hard(r_soft)
+    if e_hard_star > best.E_hard:
+        candidates = [(e_hard_star, 0, r_soft)]
+        for level in levels[:-1]:
+            spent = counted.objective + counted.gradient
+            if level.r != r_soft and spent < config.max_evaluations - 1:
+                candidates.append((counted.hard(level.r), 0, level.r))
+        candidates.append((best.E_hard, 1, best.r))
+        e_hard_star, _, r_star = min(candidates)
+        notes.append(
+            f"the soft optimum r={r_soft:.6g} has E_hard={candidates[0][0]:.6g} m, worse than the "
+            f"best step r={best.r:.6g} ({best.E_hard:.6g} m): soft and hard objectives disagree "
+            f"there; answer r={r_star:.6g} is the best of {len(candidates)} candidates on E_hard"
+        )
+    step_hit = next((p for p in sweep_points if p.r == r_star), None)
+    e_soft_star = step_hit.E_soft if step_hit else _e_from_e2(counted.e2(r_star, taus[-1]))
+    total = counted.objective + counted.gradient
+    if total > config.max_evaluations:
+        notes.append(f"{total} evaluations exceed the budget of {config.max_evaluations}")
+    return SolveResult(
+        r_star=float(r_star),
+        E_soft_star=float(e_soft_star),
+        E_hard_star=float(e_hard_star),
+        sweep=sweep_points,
+        evaluations={"objective": counted.objective, "gradient": counted.gradient},
+        on_bound=r_star in (lo, hi),
+        bracket=(float(lower), float(upper)),
+        tau_schedule=taus,
+        levels=tuple(levels),
+        notes=tuple(notes),
+        interval=(lo, hi),
+        wall_s={"sweep": t1 - t0, "solve": time.perf_counter() - t1},
+    )
+

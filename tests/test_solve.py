@@ -1,0 +1,215 @@
+"""The solver on analytic objectives: sweep grids, the continuous solve and its guarantees."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+
+from diffsense.errors import InputError
+from diffsense.solve import (
+    BracketedSecant,
+    SolveConfig,
+    basin_check,
+    default_steps,
+    dense_grid_search,
+    solve,
+    sweep,
+)
+from tests._analytic_objectives import HI, LO, STEP_W, bowl, dip_at, staircase
+
+BUDGET = 20
+XTOL = SolveConfig().xtol_rel * (HI - LO)
+
+# name -> (objective pair, where the argmin is, on a bound?)
+CASES = {
+    "bowl": (bowl(1.3), 1.3, False),
+    "bowl_on_a_step": (bowl(np.deg2rad(90.0)), np.deg2rad(90.0), False),
+    "staircase": (staircase(1.3), None, False),
+    "lower_bound": (bowl(0.2), LO, True),
+    "upper_bound": (bowl(4.0), HI, True),
+    "staircase_upper_bound": (staircase(3.5), HI, True),
+}
+
+
+@pytest.fixture(scope="module")
+def solved():
+    """Each case solved once (each solve compiles its own objective)."""
+    cache = {}
+
+    def get(name, method="secant"):
+        if (name, method) not in cache:
+            (e2, eh), _, _ = CASES[name]
+            cache[name, method] = solve(e2, eh, (LO, HI), config=SolveConfig(method=method))
+        return cache[name, method]
+
+    return get
+
+
+def test_default_steps_paper_grid_and_round_spacing():
+    np.testing.assert_allclose(default_steps(30.0, 180.0), [30, 60, 90, 120, 150, 180])
+    np.testing.assert_allclose(default_steps(20.0, 160.0), np.arange(20.0, 161.0, 20.0))
+    steps = default_steps(0.3, 1.0)
+    assert 6 <= steps.size <= 8 and steps[0] == 0.3 and steps[-1] == 1.0
+    with pytest.raises(InputError, match="LO must be smaller"):
+        default_steps(180.0, 30.0)
+
+
+def test_sweep_evaluates_hard_and_soft():
+    e2, eh = bowl(1.0)
+    points = sweep(eh, e2, [0.5, 1.0, 2.0])
+    assert [p.r for p in points] == [0.5, 1.0, 2.0]
+    for p in points:
+        assert p.E_soft == pytest.approx(math.sqrt(1.0 + (p.r - 1.0) ** 2))
+        assert p.E_hard == pytest.approx(p.E_soft)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_solve_finds_argmin_within_budget(solved, name):
+    (_, eh), expected, on_bound = CASES[name]
+    res = solved(name)
+    best_step = min(p.E_hard for p in res.sweep)
+    assert res.E_hard_star <= best_step
+    assert res.evaluations["objective"] + res.evaluations["gradient"] <= BUDGET
+    assert res.on_bound is on_bound
+    assert float(eh(res.r_star)) == pytest.approx(res.E_hard_star)
+    if expected is not None:
+        assert abs(res.r_star - expected) <= XTOL
+    assert all(math.isfinite(v) for v in (res.r_star, res.E_soft_star, res.E_hard_star))
+
+
+def test_staircase_answer_sits_on_the_best_plateau(solved):
+    # The hard staircase is best (q = 1.3 exactly) on the plateau [1.25, 1.30).
+    res = solved("staircase")
+    assert 1.25 - 1e-9 <= res.r_star < 1.30
+    assert res.E_hard_star == pytest.approx(1.0)
+    # Best step: 60 deg (q = 1.05), so the bracket is its neighbours 30 and 90 deg.
+    assert res.bracket == pytest.approx((np.deg2rad(30.0), np.deg2rad(90.0)))
+
+
+def test_continuation_levels_track_the_minimum(solved):
+    res = solved("bowl")
+    assert [lv.tau for lv in res.levels] == [4.0, 2.0, 1.0]
+    assert all(lv.converged and lv.bound == 0 for lv in res.levels)
+    assert res.notes == ()
+
+
+def test_bisection_method_keeps_the_guarantees(solved):
+    # optx.Bisection needs more evaluations than the secant: with the same budget it may stop
+    # early, but the answer is still chosen on the hard objective.
+    for name in ("bowl", "lower_bound"):
+        res = solved(name, "bisection")
+        assert res.E_hard_star <= min(p.E_hard for p in res.sweep)
+        assert res.evaluations["objective"] + res.evaluations["gradient"] <= BUDGET
+
+
+def test_hard_objective_overrules_a_worse_soft_optimum():
+    # Soft minimum at 1.3, but the hard objective is only good at the 90-deg step.
+    r_dip = float(np.deg2rad(90.0))
+    e2, eh = dip_at(r_dip, center=1.3)
+    res = solve(e2, eh, (LO, HI))
+    assert res.r_star == pytest.approx(r_dip)
+    assert res.E_hard_star <= min(p.E_hard for p in res.sweep)
+    assert any("worse than the best step" in n for n in res.notes)
+    assert res.evaluations["objective"] + res.evaluations["gradient"] <= BUDGET
+
+
+def test_float32_outer_problem_and_small_temperatures():
+    e2, eh = staircase(1.3)
+    cfg = SolveConfig(dtype="float32", tau_schedule=(1.0, 0.1, 0.01))
+    res = solve(e2, eh, (LO, HI), config=cfg)
+    assert res.E_hard_star <= min(p.E_hard for p in res.sweep)
+    assert all(math.isfinite(v) for v in (res.r_star, res.E_soft_star, res.E_hard_star))
+
+
+def test_given_sweep_is_reused_and_custom_steps_are_checked():
+    e2, eh = bowl(1.3)
+    points = sweep(eh, e2, default_steps(LO, HI))
+    res = solve(e2, eh, (LO, HI), sweep_points=points)
+    assert res.sweep == points
+    with pytest.raises(InputError, match="leave the interval"):
+        solve(e2, eh, (LO, HI), steps=[0.1, 1.0])
+
+
+def test_nan_gradient_is_reported():
+    def e2(r, tau):
+        return jnp.sqrt(r - 10.0) + tau  # NaN everywhere on the interval
+
+    with pytest.raises(FloatingPointError, match="not finite"):
+        solve(e2, lambda r: 1.0, (LO, HI))
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(tau_schedule=(1.0, 2.0)), "must not increase"),
+        (dict(tau_schedule=(0.0,)), "positive"),
+        (dict(xtol_rel=0.0), "xtol_rel"),
+        (dict(max_evaluations=5), "too small"),
+    ],
+)
+def test_bad_config_is_one_clear_error(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        SolveConfig(**kwargs)
+
+
+def test_bracketed_secant_under_jit_minimum_not_maximum():
+    # g has a root at 0 (a maximum of E: g goes + to -) and at +-1 (minima): start near the max.
+    def g(r, _):
+        return r**3 - r
+
+    @jax.jit
+    def find(r0):
+        sol = optx.root_find(
+            g, BracketedSecant(rtol=0.0, atol=1e-9), r0, options=dict(lower=-0.5, upper=2.0),
+            throw=False,
+        )
+        return sol.value, sol.stats["num_steps"], sol.state.bound
+
+    r, steps, bound = find(jnp.asarray(0.01))
+    assert float(r) == pytest.approx(1.0, abs=1e-8)
+    assert int(bound) == 0 and int(steps) <= 20
+
+
+def test_dense_grid_and_basin_check(solved):
+    _, eh = CASES["staircase"][0]
+    dense = dense_grid_search(eh, (LO, HI), float(np.deg2rad(0.5)))
+    assert dense.evaluations == dense.r.size == 301
+    assert dense.r[0] == LO and dense.r[-1] == HI
+    a, b = dense.basin()
+    assert a <= dense.r[dense.best_index] <= b
+    res = solved("staircase")
+    assert basin_check(dense, res.r_star, res.E_hard_star, res.bracket) is None
+    assert res.E_hard_star <= dense.E_hard.min() + 1e-12
+    with pytest.raises(InputError):
+        dense_grid_search(eh, (LO, HI), 0.0)
+
+
+def test_basin_check_explains_a_miss():
+    # Two basins: the global one at r = 1 and a shallower one at r = 2.5 (or equally deep).
+    def two_basins(penalty):
+        return lambda r: 1.0 + 0.3 * (r - 1.0) ** 2 * (r - 2.5) ** 2 + penalty * (r > 2.0)
+
+    dense = dense_grid_search(two_basins(0.05), (LO, HI), 0.01)
+    a, b = dense.basin()
+    assert a < 1.0 < b < 2.5
+    assert basin_check(dense, 1.0) is None
+    reason = basin_check(dense, 2.5, 1.05, bracket=(2.0, 3.0))
+    assert "outside the basin" in reason and "worse by" in reason and "does not bracket" in reason
+    reason = basin_check(dense, 2.5, 1.05, bracket=(0.6, 3.0))
+    assert "soft objective's minimum misses the hard basin" in reason
+    equal = dense_grid_search(two_basins(0.0), (LO, HI), 0.01)
+    other_minimum = 2.5 if equal.r[equal.best_index] < 1.75 else 1.0
+    assert "at least as deep" in basin_check(equal, other_minimum, 1.0)
+
+
+def test_basin_includes_plateaus():
+    _, eh = staircase(1.3)
+    dense = dense_grid_search(eh, (1.0, 1.6), STEP_W / 5)
+    a, b = dense.basin()
+    # The best plateau [1.25, 1.30) and the rising steps on both sides belong to the basin.
+    assert a == pytest.approx(1.0) and b == pytest.approx(1.6)
