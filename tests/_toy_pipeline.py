@@ -19,6 +19,9 @@ from tests._synthetic import straight_scene
 NOISE_M = 0.3
 
 
+TOY_GAIN = 0.01
+
+
 def toy_scenes(n: int = 3, num_frames: int = 101) -> tuple[Scene, np.ndarray]:
     scenes = [
         straight_scene(
@@ -54,8 +57,9 @@ def toy_detect():
     return detect
 
 
-def toy_predict(inputs: PredictorInputs):
+def toy_predict(gain, inputs: PredictorInputs):
+    """`gain` [] scales the social nudge: the stand-in's one 'weight'."""
     velocity = (inputs.hist[:, -1] - inputs.hist[:, -6]) / 1.0  # [B, 2] per second (5 points = 1 s)
     steps = jnp.arange(1, 26, dtype=inputs.hist.dtype) * 0.2
-    social = jnp.einsum("bm,bmd->bd", inputs.nbr_weight, inputs.nbr_hist[:, :, -1]) * 0.01
+    social = jnp.einsum("bm,bmd->bd", inputs.nbr_weight, inputs.nbr_hist[:, :, -1]) * gain
     return inputs.hist[:, -1][:, None] + (velocity + social)[:, None] * steps[None, :, None]

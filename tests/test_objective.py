@@ -9,14 +9,14 @@ import pytest
 
 from diffsense.objective import EstimatorConfig, make_objective
 from diffsense.tracks import prediction_frames
-from tests._toy_pipeline import toy_detect, toy_predict, toy_scenes
+from tests._toy_pipeline import TOY_GAIN, toy_detect, toy_predict, toy_scenes
 
 
 @pytest.fixture(scope="module")
 def objective():
     scenes, scenario = toy_scenes()
     frames = prediction_frames(scenes.num_frames)
-    return make_objective(scenes, scenario, frames, toy_detect(), toy_predict, fill="hold")
+    return make_objective(scenes, scenario, frames, toy_detect(), toy_predict, TOY_GAIN, fill="hold")
 
 
 def test_blind_sensor_is_penalised(objective):
@@ -58,7 +58,7 @@ def test_horizon_rmse_shapes_and_growth(objective):
 def test_monte_carlo_estimator_is_deterministic_and_differentiable():
     scenes, scenario = toy_scenes(n=2)
     frames = prediction_frames(scenes.num_frames)[:4]
-    mc = make_objective(scenes, scenario, frames, toy_detect(), toy_predict, fill="interp",
+    mc = make_objective(scenes, scenario, frames, toy_detect(), toy_predict, TOY_GAIN, fill="interp",
                         estimator=EstimatorConfig(kind="mc", samples=3, relax_temperature=0.3),
                         key=jax.random.PRNGKey(1))
     v1, g1 = mc.e2_and_grad(40.0)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import Literal
+from typing import Any, Literal
 
 import jax
 import jax.numpy as jnp
@@ -36,8 +36,9 @@ Mode = Literal["soft", "hard"]
 # detect(scene [T, V], r, tau_scale, mode, key) -> Detections [T, V]; the key fixes the
 # measurement-noise draws of that scene variant (common random numbers across r).
 DetectFn = Callable[[Scene, Array, Array, Mode, Array], Detections]
-# predict(inputs with batch B) -> future means [B, 25, 2] in the same SI frame
-PredictFn = Callable[[PredictorInputs], Float[Array, "B 25 2"]]
+# predict(model, inputs with batch B) -> future means [B, 25, 2] in the same SI frame; `model`
+# is a pytree (the predictor's weights) passed as data so that jit does not bake it in.
+PredictFn = Callable[[Any, PredictorInputs], Float[Array, "B 25 2"]]
 
 
 @jax.tree_util.register_dataclass
@@ -53,6 +54,7 @@ class ObjectiveData:
         true_fut: [N, I, 25, 2] the target's true future [m].
         noise_key: [N, ...] the PRNG key of each variant's measurement noise.
         mc_uniform: [N, K, T, V] fixed uniform draws of the Monte-Carlo estimator (K = 0 if unused).
+        model: the predictor's weights (any pytree the predict function takes).
     """
 
     scenes: Scene
@@ -62,6 +64,7 @@ class ObjectiveData:
     true_fut: Float[Array, "N I 25 2"]
     noise_key: Array
     mc_uniform: Float[Array, "N K T V"]
+    model: Any
 
 
 def _inputs(scenes: Scene, det: Detections, frames: np.ndarray, fill: FillPolicy) -> PredictorInputs:
@@ -99,9 +102,8 @@ class Objective:
         self._detections_jit = jax.jit(self._detections, static_argnums=3)
 
     # -- pure functions of (r, fixed data) ------------------------------------------------------
-    def _predict_nI(self, inputs: PredictorInputs) -> Float[Array, "N I 25 2"]:
-        n, i = self.data.gt_pred.shape[:2]
-        return self._predict(inputs).reshape(n, i, *self.data.gt_pred.shape[2:])
+    def _predict_nI(self, data: ObjectiveData, inputs: PredictorInputs) -> Float[Array, "N I 25 2"]:
+        return self._predict(data.model, inputs).reshape(data.gt_pred.shape)
 
     def _detect_all(self, r, tau, data: ObjectiveData, mode: Mode) -> Detections:
         return jax.vmap(lambda s, k: self._detect(s, r, tau, mode, k))(data.scenes, data.noise_key)
@@ -109,20 +111,20 @@ class Objective:
     def _e2_soft(self, r, tau, data: ObjectiveData):
         det = self._detect_all(r, tau, data, "soft")
         if self.estimator.kind != "mc":
-            pred = self._predict_nI(_inputs(data.scenes, det, self.frames, self.fill))
+            pred = self._predict_nI(data, _inputs(data.scenes, det, self.frames, self.fill))
             return _mean_sq_error(pred, data.gt_pred, data.weight)
 
         def one_sample(uniform):
             sample = relaxed_bernoulli(det.p_detect, uniform, self.estimator.relax_temperature)
             d = dataclasses.replace(det, p_detect=sample)
-            pred = self._predict_nI(_inputs(data.scenes, d, self.frames, self.fill))
+            pred = self._predict_nI(data, _inputs(data.scenes, d, self.frames, self.fill))
             return _mean_sq_error(pred, data.gt_pred, data.weight)
 
         return jnp.mean(jax.lax.map(one_sample, jnp.swapaxes(data.mc_uniform, 0, 1)))
 
     def _e2_hard(self, r, data: ObjectiveData):
         det = self._detect_all(r, jnp.ones_like(r), data, "hard")
-        pred = self._predict_nI(_inputs(data.scenes, det, self.frames, self.fill))
+        pred = self._predict_nI(data, _inputs(data.scenes, det, self.frames, self.fill))
         return _mean_sq_error(pred, data.gt_pred, data.weight)
 
     def _detections(self, r, tau, data: ObjectiveData, mode: Mode) -> Detections:
@@ -131,7 +133,7 @@ class Objective:
     def _horizon_rmse(self, r, tau, data: ObjectiveData, mode: Mode):
         """Per-scenario RMSE against the true future at each horizon step, [S, 25] twice."""
         det = self._detect_all(r, tau, data, mode)
-        pred = self._predict_nI(_inputs(data.scenes, det, self.frames, self.fill))
+        pred = self._predict_nI(data, _inputs(data.scenes, det, self.frames, self.fill))
         onehot = jax.nn.one_hot(data.scenario, self.num_scenarios) * data.weight[:, None]
         count = jnp.maximum(jnp.sum(onehot, axis=0), 1.0)[:, None]  # a scenario may be absent
 
@@ -174,6 +176,7 @@ def make_objective(
     frames: np.ndarray,
     detect: DetectFn,
     predict: PredictFn,
+    model: Any = None,
     fill: FillPolicy = "hold",
     estimator: EstimatorConfig = EstimatorConfig(),
     key: Array | None = None,
@@ -204,8 +207,9 @@ def make_objective(
         fixed = shard_leading_axis(fixed, pad_weight_index=2)
     scenes, scenario, weight, noise_keys, uniform, fut = fixed
     gt_inputs = _inputs(scenes, jax.vmap(ground_truth_detections)(scenes), frames, fill)
-    gt_pred = jax.jit(predict)(gt_inputs).reshape(scenario.shape[0], len(frames), -1, 2)
+    gt_pred = jax.jit(predict)(model, gt_inputs).reshape(scenario.shape[0], len(frames), -1, 2)
     data = ObjectiveData(scenes=scenes, scenario=scenario, weight=weight, gt_pred=gt_pred,
-                         true_fut=fut.astype(gt_pred.dtype), noise_key=noise_keys, mc_uniform=uniform)
+                         true_fut=fut.astype(gt_pred.dtype), noise_key=noise_keys, mc_uniform=uniform,
+                         model=model)
     s = int(num_scenarios if num_scenarios is not None else int(jnp.max(scenario)) + 1)
     return Objective(data, frames, detect, predict, fill, estimator, s)
