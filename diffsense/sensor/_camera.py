@@ -1,0 +1,72 @@
+"""Stereo camera with an equidistant lens: resolvability, occlusion, stereo depth noise.
+
+Pixels per radian k = width_px / HFOV_rad (f-theta projection: finite at 180 deg and beyond).
+A vehicle is detected when its centre is in the FOV, within range, at least `min_width_px` wide
+in the image (k times its angular width) and at least `min_visible_fraction` of its angular
+interval is not covered by nearer vehicles:
+p = gate(FOV) gate(range) gate(width_px - min) gate(visible - 0.6).
+Measurements: depth along the ray with sigma_Z = Z^2 disparity_error / (k baseline) and bearing
+with sigma = bearing_error_px / k.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from diffsense.scene import Scene
+from diffsense.sensor._datatypes import Detections
+from diffsense.sensor._gates import Mode
+from diffsense.sensor._geometry import polar, vehicle_occlusion
+from diffsense.sensor._measure import detect_of, p_detect_of
+from diffsense.sensor._params import CameraConfig, CameraParams
+
+
+def camera_px_per_rad(params: CameraParams) -> Float[Array, ""]:
+    """Pixels per radian of the equidistant lens, k = width_px / HFOV_rad [px/rad]."""
+    return params.width_px / jnp.deg2rad(params.hfov_deg)
+
+
+def camera_depth_sigma_m(
+    range_m: Float[Array, "*S"], params: CameraParams, config: CameraConfig
+) -> Float[Array, "*S"]:
+    """Stereo depth noise sigma_Z = Z^2 disparity_error / (k baseline) [m]."""
+    k = camera_px_per_rad(params)
+    return range_m**2 * config.disparity_error_px / (k * params.baseline_m)
+
+
+def _camera_terms(scene: Scene, params: CameraParams, config: CameraConfig, mode: Mode,
+                  temperature):
+    range_m, azimuth_rad = polar(scene, config.mount_x_m)
+    tau = config.temperature
+    half, hidden = vehicle_occlusion(scene, range_m, azimuth_rad, config.mount_x_m, mode,
+                                     tau.near_m * temperature, tau.overlap_deg * temperature)
+    k = camera_px_per_rad(params)
+    gates = (
+        (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
+        (params.range_m - range_m, tau.range_m * temperature),
+        (k * 2.0 * half - config.min_width_px, tau.width_px * temperature),
+        ((1.0 - hidden) - config.min_visible_fraction, tau.visible * temperature),
+    )
+    depth_sigma = camera_depth_sigma_m(range_m, params, config)
+    bearing_sigma = config.bearing_error_px / k * jnp.ones_like(range_m)
+    return gates, range_m, azimuth_rad, depth_sigma, bearing_sigma
+
+
+def camera_p_detect(
+    scene: Scene, params: CameraParams, config: CameraConfig, *, mode: Mode = "soft",
+    temperature: float | Float[Array, ""] = 1.0,
+) -> Float[Array, "T V"]:
+    """Camera detection probability [T, V] (soft, differentiable in `params`) or 0/1 (hard).
+
+    `temperature` scales every soft-gate temperature of `config` (temperature continuation).
+    """
+    return p_detect_of(_camera_terms, scene, params, config, mode, temperature)
+
+
+def camera_detect(
+    scene: Scene, params: CameraParams, config: CameraConfig, key: PRNGKeyArray, *,
+    mode: Mode = "soft", temperature: float | Float[Array, ""] = 1.0,
+) -> Detections:
+    """Camera `Detections` [T, V]: p_detect and noisy stereo depth/bearing in the world."""
+    return detect_of(_camera_terms, scene, params, config, key, mode, temperature)

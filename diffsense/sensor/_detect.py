@@ -1,0 +1,65 @@
+"""One entry point for any sensor, single scene or a batch of scenes (vmap at the edge)."""
+
+from __future__ import annotations
+
+import jax
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from diffsense.errors import InputError
+from diffsense.scene import Scene
+from diffsense.sensor._camera import camera_detect, camera_p_detect
+from diffsense.sensor._datatypes import Detections
+from diffsense.sensor._gates import Mode
+from diffsense.sensor._params import CameraConfig, CameraParams, RadarConfig, RadarParams
+from diffsense.sensor._radar import radar_detect, radar_p_detect
+
+Params = RadarParams | CameraParams
+Config = RadarConfig | CameraConfig
+
+
+def _pick(params: Params, config: Config):
+    if isinstance(config, RadarConfig) and isinstance(params, RadarParams):
+        return radar_detect, radar_p_detect
+    if isinstance(config, CameraConfig) and isinstance(params, CameraParams):
+        return camera_detect, camera_p_detect
+    raise InputError(
+        f"sensor parameters {type(params).__name__} do not match config {type(config).__name__}"
+    )
+
+
+def detect(
+    scene: Scene, params: Params, config: Config, key: PRNGKeyArray, *, mode: Mode = "soft",
+    temperature: float | Float[Array, ""] = 1.0,
+) -> Detections:
+    """The sensor described by (`params`, `config`) looking at `scene` [T, V].
+
+    `mode` "soft" gives detection probabilities differentiable in every parameter; "hard" the
+    0/1 detections. `key` fixes the measurement-noise draws (common random numbers across
+    parameters). `temperature` scales all soft-gate temperatures of `config`.
+    """
+    sensor_detect, _ = _pick(params, config)
+    return sensor_detect(scene, params, config, key, mode=mode, temperature=temperature)
+
+
+def p_detect(
+    scene: Scene, params: Params, config: Config, *, mode: Mode = "soft",
+    temperature: float | Float[Array, ""] = 1.0,
+) -> Float[Array, "T V"]:
+    """Only the detection probabilities of `detect` (no noise draws)."""
+    _, sensor_p = _pick(params, config)
+    return sensor_p(scene, params, config, mode=mode, temperature=temperature)
+
+
+def detect_batch(
+    scenes: Scene, params: Params, config: Config, key: PRNGKeyArray, *, mode: Mode = "soft",
+    temperature: float | Float[Array, ""] = 1.0,
+) -> Detections:
+    """`detect` over a batch of scenes [N, T, V] with shared parameters; one noise key each.
+
+    Scene n draws its noise from `jax.random.fold_in(key, n)`.
+    """
+    n = scenes.x_m.shape[0]
+    keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(jax.numpy.arange(n))
+    return jax.vmap(
+        lambda scene, k: detect(scene, params, config, k, mode=mode, temperature=temperature)
+    )(scenes, keys)

@@ -1,0 +1,100 @@
+"""Sensor configs and parameters: loading, specs, domain refusals."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import pytest
+
+from diffsense import sensor
+from diffsense.config import default_text
+from diffsense.errors import InputError
+
+
+@pytest.mark.parametrize("name", sensor.SENSORS)
+def test_shipped_configs_load_and_specs_match_params(name):
+    config = sensor.load_config(name)
+    specs = sensor.param_specs(name, config)
+    fields = [f.name for f in dataclasses.fields(config.params)]
+    assert [s.name for s in specs] == fields
+    for spec in specs:
+        assert spec.default == getattr(config.params, spec.name)
+        assert spec.contains(spec.default)
+        assert spec.lower < spec.upper and math.isfinite(spec.upper)
+    hash(config)  # static under jit
+
+
+def test_issue_parameters_are_differentiable():
+    assert {"hfov_deg", "range_m", "vfov_deg", "tx_power_dbm", "noise_figure_db"} <= {
+        s.name for s in sensor.param_specs("radar")}
+    assert {"hfov_deg", "range_m", "width_px", "baseline_m"} <= {
+        s.name for s in sensor.param_specs("camera")}
+
+
+@pytest.mark.parametrize(
+    "name, param, value",
+    [
+        ("radar", "hfov_deg", 0.0), ("radar", "hfov_deg", -1.0), ("radar", "hfov_deg", 360.5),
+        ("radar", "range_m", -1.0), ("radar", "range_m", 0.0), ("radar", "range_m", math.nan),
+        ("radar", "vfov_deg", 0.0), ("radar", "noise_figure_db", -1.0),
+        ("radar", "tx_power_dbm", math.inf), ("camera", "hfov_deg", 400.0),
+        ("camera", "baseline_m", 0.0), ("camera", "width_px", 0.0), ("camera", "range_m", -5.0),
+    ],
+)
+def test_out_of_domain_values_are_refused_in_one_line(name, param, value):
+    config = sensor.load_config(name)
+    with pytest.raises(InputError, match=f"{name} {param} = .* outside its domain") as err:
+        sensor.make_params(config, **{param: value})
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("name", sensor.SENSORS)
+def test_domain_edges_are_accepted(name):
+    config = sensor.load_config(name)
+    for spec in sensor.param_specs(name):
+        low = spec.lower + 1e-6 if spec.lower_open else spec.lower
+        for value in (low, spec.upper):
+            assert getattr(sensor.make_params(config, **{spec.name: value}), spec.name) == value
+
+
+def test_unknown_parameter_sensor_mode_and_mismatch_are_refused():
+    radar, camera = sensor.load_config("radar"), sensor.load_config("camera")
+    with pytest.raises(InputError, match="unknown radar parameter 'width_px'"):
+        sensor.with_param(radar.params, "width_px", 1.0)
+    with pytest.raises(InputError, match="unknown sensor 'lidar'"):
+        sensor.param_specs("lidar")
+    with pytest.raises(InputError, match="do not match"):
+        sensor.p_detect(None, radar.params, camera)
+
+
+def test_with_param_accepts_a_traced_value():
+    config = sensor.load_config("camera")
+    k = jax.jit(lambda w: sensor.camera_px_per_rad(sensor.with_param(config.params, "width_px", w)))
+    assert float(k(2560.0)) == pytest.approx(2560.0 / math.radians(30.0))
+
+
+def _write(tmp_path, name, text):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (("snr_threshold_db = 13.2", "snr_threshold = 13.2"), "unknown key 'snr_threshold'"),
+        (("hfov_deg = 30.0", "hfov_deg = 0.0"), "radar hfov_deg = 0 is outside"),
+        (("snr_db = 1.0", "snr_db = 0.0"), "temperature snr_db must be > 0"),
+        (("frequency_ghz = 77.0", 'frequency_ghz = "77"'), "expected a number"),
+        (("antenna_efficiency = 0.6", "antenna_efficiency = 1.5"), "antenna_efficiency must be <= 1"),
+    ],
+)
+def test_malformed_radar_config_is_refused_naming_the_file(tmp_path, edit, message):
+    text = default_text("sensors/radar.toml")
+    assert edit[0] in text
+    path = _write(tmp_path, "radar", text.replace(edit[0], edit[1], 1))
+    with pytest.raises(InputError, match=message) as err:
+        sensor.load_config("radar", path)
+    assert str(path) in str(err.value)
