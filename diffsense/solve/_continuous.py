@@ -181,7 +181,9 @@ def _level_secant(g, counted, y0, tau, lower, upper, probe, tol, max_steps):
         solver,
         counted.as_r(y0),
         args=counted.as_r(tau),
-        options=dict(lower=counted.as_r(lower), upper=counted.as_r(upper), probe=counted.as_r(probe)),
+        options=dict(
+            lower=counted.as_r(lower), upper=counted.as_r(upper), probe=counted.as_r(probe)
+        ),
         max_steps=max_steps,
         throw=False,
     )
@@ -283,14 +285,18 @@ def solve(
             notes.append(f"budget spent before tau={tau:g}: continuation stopped early")
             break
         if config.method == "secant":
-            r, n, bound, done = _level_secant(g, counted, y, tau, lower, upper, probe, tol, max_steps)
+            r, n, bound, done = _level_secant(
+                g, counted, y, tau, lower, upper, probe, tol, max_steps
+            )
         else:
             (r, bound), n, done = _level_bisection(g, counted, y, tau, lower, upper, tol, max_steps)
         if not done:
             notes.append(f"tau={tau:g}: stopped after {n} gradient evaluations (budget share)")
         probe = max(2.0 * tol, abs(r - y)) if levels else max(2.0 * tol, 0.0625 * (upper - lower))
         y = r
-        levels.append(LevelResult(tau=tau, r=r, gradient_evaluations=n, bound=bound, converged=done))
+        levels.append(
+            LevelResult(tau=tau, r=r, gradient_evaluations=n, bound=bound, converged=done)
+        )
 
     r_soft = levels[-1].r if levels else best.r
     last = levels[-1] if levels else None

@@ -89,7 +89,10 @@ def argmin(
     """
     lower = jnp.asarray(lower)
     upper = jnp.asarray(upper, lower.dtype)
-    y0 = 0.5 * (lower + upper) if r0 is None else jnp.clip(jnp.asarray(r0, lower.dtype), lower, upper)
+    if r0 is None:
+        y0 = 0.5 * (lower + upper)
+    else:
+        y0 = jnp.clip(jnp.asarray(r0, lower.dtype), lower, upper)
 
     def g(r, th):
         return jax.grad(e2_soft, argnums=0)(r, th)

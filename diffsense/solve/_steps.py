@@ -108,7 +108,9 @@ def best_step(points: Sequence[SweepPoint]) -> int:
     return min(range(len(points)), key=lambda i: (points[i].E_hard, points[i].E_soft, i))
 
 
-def bracket_around(points: Sequence[SweepPoint], index: int, lo: float, hi: float) -> tuple[float, float]:
+def bracket_around(
+    points: Sequence[SweepPoint], index: int, lo: float, hi: float
+) -> tuple[float, float]:
     """The neighbouring steps of step `index` (the interval's ends beyond the first/last step)."""
     left = points[index - 1].r if index > 0 else lo
     right = points[index + 1].r if index + 1 < len(points) else hi

@@ -1,0 +1,157 @@
+"""The run's figures, written atomically as PNG.
+
+- objective.png: E_soft and E_hard over r, the sweep's points and r*, dE/dr on a second axis.
+- rmse_horizon.png: the paper's Figs 6/7: per-horizon RMSE (0.2 .. 5 s) against the true
+  future for every sweep step and for ground-truth inputs, one panel per scenario.
+- detection timeline: the paper's Figs 8/9: p_detect over time of the target and its
+  neighbours, one panel per r value.
+
+Figures are built on `matplotlib.figure.Figure` (Agg canvas, no pyplot): nothing global is
+touched and nothing needs closing. `scale` and `unit` convert r for display.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from diffsense._io import save_figure
+
+# The predictor's horizon: 25 points at 5 Hz (0.2 .. 5 s).
+HORIZON_DT_S = 0.2
+_DPI = 120
+
+
+def _label(key: Any, scale: float, unit: str) -> str:
+    if isinstance(key, (int, float, np.floating)):
+        return f"{float(key) * scale:g}{' ' + unit if unit else ''}"
+    return str(key)
+
+
+def plot_objective(
+    path: str | os.PathLike[str],
+    r: Sequence[float],
+    E_soft: Sequence[float],
+    E_hard: Sequence[float],
+    dE_dr: Sequence[float],
+    sweep: Sequence[Mapping[str, float]],
+    r_star: float,
+    *,
+    param: str = "r",
+    scale: float = 1.0,
+    unit: str = "",
+) -> None:
+    """objective.png: E_soft(r), E_hard(r) [m] with the sweep and r*, dE/dr on a twin axis.
+
+    Args:
+        r, E_soft, E_hard, dE_dr: [n] curves over r (the objective's units; dE/dr in m per unit).
+        sweep: [{"r", "E_hard", "E_soft"}] the stepped sweep.
+        r_star: the answer.
+        param, scale, unit: x-axis name and display conversion (dE/dr is divided by scale).
+    """
+    x = np.asarray(r, dtype=float) * scale
+    fig = Figure(figsize=(7.0, 4.2))
+    ax = fig.add_subplot()
+    ax.plot(x, E_soft, color="C0", label="E soft")
+    ax.step(x, E_hard, where="mid", color="C1", label="E hard")
+    sweep_r = [p["r"] * scale for p in sweep]
+    ax.plot(sweep_r, [p["E_hard"] for p in sweep], "o", color="C1", label="sweep (hard)")
+    r_star_label = f"r* = {_label(r_star, scale, unit)}"
+    ax.axvline(r_star * scale, color="C3", linestyle="--", label=r_star_label)
+    ax.set_xlabel(f"{param} [{unit}]" if unit else param)
+    ax.set_ylabel("E_RMSE [m]")
+    twin = ax.twinx()
+    slope = np.asarray(dE_dr, dtype=float) / scale
+    twin.plot(x, slope, color="C2", alpha=0.6, label="dE/dr (soft)")
+    twin.axhline(0.0, color="C2", linewidth=0.5)
+    twin.set_ylabel(f"dE/d{param} [m/{unit}]" if unit else f"dE/d{param}")
+    handles = ax.get_legend_handles_labels()
+    twin_handles = twin.get_legend_handles_labels()
+    ax.legend(handles[0] + twin_handles[0], handles[1] + twin_handles[1], fontsize=8, loc="best")
+    fig.tight_layout()
+    save_figure(fig, path, dpi=_DPI)
+
+
+def plot_rmse_horizon(
+    path: str | os.PathLike[str],
+    curves: Mapping[str, Mapping[str, Any]],
+    *,
+    param: str = "r",
+    scale: float = 1.0,
+    unit: str = "",
+) -> None:
+    """rmse_horizon.png: per-horizon RMSE [m] per sweep step vs ground-truth inputs.
+
+    Args:
+        curves: scenario -> {"gt": [H] RMSE from ground-truth inputs,
+                             "steps": {r (number) or label: [H] RMSE from sensor inputs}};
+            H = 25 horizon points 0.2 .. 5 s. Two panels a row (the paper pairs RLC / LLC).
+        param, scale, unit: legend labels of the steps.
+    """
+    names = list(curves)
+    if not names:
+        raise ValueError("no scenarios to plot")
+    ncols = min(2, len(names))
+    nrows = math.ceil(len(names) / ncols)
+    fig = Figure(figsize=(5.0 * ncols, 3.2 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    for ax, name in zip(axes.flat, names):
+        gt = np.asarray(curves[name]["gt"], dtype=float)
+        t = HORIZON_DT_S * np.arange(1, gt.size + 1)
+        ax.plot(t, gt, color="k", linewidth=2.0, label="ground truth")
+        for i, (key, rmse) in enumerate(curves[name]["steps"].items()):
+            label = f"{param} {_label(key, scale, unit)}"
+            ax.plot(t, np.asarray(rmse, dtype=float), color=f"C{i % 10}", label=label)
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("prediction horizon [s]")
+        ax.set_ylabel("RMSE [m]")
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(names):]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=_DPI)
+
+
+def plot_detection_timeline(
+    path: str | os.PathLike[str],
+    p_detect: Mapping[Any, Any],
+    roles: Sequence[str],
+    *,
+    dt_s: float = 0.1,
+    param: str = "r",
+    scale: float = 1.0,
+    unit: str = "",
+) -> None:
+    """The detection timeline: p_detect of each vehicle over time, one panel per r.
+
+    Args:
+        p_detect: r (number) or label -> [T, V] detection probabilities in [0, 1].
+        roles: [V] a name per vehicle column ("target", "lead", ...), bottom to top.
+        dt_s: frame period [s].
+        param, scale, unit: panel titles.
+    """
+    keys = list(p_detect)
+    if not keys:
+        raise ValueError("no detection timelines to plot")
+    fig = Figure(figsize=(7.0, 0.5 + 0.35 * len(roles) * len(keys) + 0.6 * len(keys)))
+    axes = fig.subplots(len(keys), 1, squeeze=False, sharex=True)[:, 0]
+    for ax, key in zip(axes, keys):
+        p = np.clip(np.asarray(p_detect[key], dtype=float), 0.0, 1.0)
+        if p.ndim != 2 or p.shape[1] != len(roles):
+            raise ValueError(f"p_detect[{key!r}] has shape {p.shape}, expected [T, {len(roles)}]")
+        t = dt_s * np.arange(p.shape[0])
+        for v in range(p.shape[1]):
+            band = v + 0.8 * p[:, v]
+            ax.fill_between(t, v, band, step="mid", color=f"C{v % 10}", alpha=0.8, linewidth=0)
+        ax.set_yticks(np.arange(len(roles)) + 0.4, list(roles), fontsize=8)
+        ax.set_ylim(-0.1, len(roles))
+        ax.set_title(f"{param} {_label(key, scale, unit)}", fontsize=9)
+    axes[-1].set_xlabel("time [s]  (band height = detection probability)")
+    fig.tight_layout()
+    save_figure(fig, path, dpi=_DPI)

@@ -1,0 +1,104 @@
+"""Plain-text tables: the run summary and the paper's radar-versus-camera comparison.
+
+Both read result dicts (the result.json content, `result_dict`), so a table can be rebuilt
+from a saved run. `scale` and `unit` convert r for display (e.g. 180/pi and "deg").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+
+def format_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """Aligned text: first column left-aligned, the others right-aligned."""
+    cells = [[str(h) for h in headers]] + [[_cell(v) for v in row] for row in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(headers))]
+
+    def line(row: list[str]) -> str:
+        parts = [row[0].ljust(widths[0])] + [c.rjust(w) for c, w in zip(row[1:], widths[1:])]
+        return "  ".join(parts).rstrip()
+
+    rule = "  ".join("-" * w for w in widths)
+    return "\n".join([line(cells[0]), rule] + [line(r) for r in cells[1:]])
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:.4f}"
+    return str(value)
+
+
+def _r(value: float | None, scale: float) -> str:
+    """r for display: converted, 5 significant digits."""
+    return "-" if value is None else f"{value * scale:.5g}"
+
+
+def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = "") -> str:
+    """The printed summary of one run: the sweep, then the continuous answer.
+
+    Args:
+        result: a result dict (result.json content).
+        scale: display factor for r (e.g. 180/pi for degrees).
+        unit: display unit of r.
+    """
+    name = f"{result['param']} [{unit}]" if unit else result["param"]
+    best = min(result["sweep"], key=lambda p: (p["E_hard"] is None, p["E_hard"]))
+    rows = [
+        [f"step {_r(p['r'], scale)}", p["E_hard"], p["E_soft"], "best step" if p is best else ""]
+        for p in result["sweep"]
+    ]
+    where = "on bound" if result["on_bound"] else "interior"
+    r_star = f"r* {_r(result['r_star'], scale)}"
+    rows.append([r_star, result["E_hard_star"], result["E_soft_star"], where])
+    ev, wall = result["evaluations"], result["wall_s"]
+    lines = [
+        f"{result['sensor']}: {name} over [{_r(result['interval'][0], scale)}, "
+        f"{_r(result['interval'][1], scale)}]",
+        format_table(["r", "E_hard [m]", "E_soft [m]", ""], rows),
+        f"continuous solve: {ev['objective']} objective + {ev['gradient']} gradient evaluations; "
+        f"wall {wall['compile']:.1f} s compile + {wall['run']:.1f} s run",
+    ]
+    lines += [f"note: {n}" for n in result.get("notes", [])]
+    return "\n".join(lines)
+
+
+def comparison_table(
+    results: Mapping[str, Mapping[str, Any]], *, scale: float = 1.0, unit: str = ""
+) -> str:
+    """The paper's radar-versus-camera comparison: E_hard per step and the optimum per sensor.
+
+    Args:
+        results: sensor name -> result dict, all for the same parameter and steps.
+        scale, unit: display of r.
+    """
+    sensors = list(results)
+    if not sensors:
+        raise ValueError("no results to compare")
+    steps = [p["r"] for p in results[sensors[0]]["sweep"]]
+    for s in sensors[1:]:
+        if [p["r"] for p in results[s]["sweep"]] != steps:
+            raise ValueError(f"sensor {s!r} was swept on other steps than {sensors[0]!r}")
+    label = f"{results[sensors[0]]['param']} [{unit}]" if unit else results[sensors[0]]["param"]
+    rows = [
+        [f"E_hard at {_r(r, scale)}"] + [results[s]["sweep"][i]["E_hard"] for s in sensors]
+        for i, r in enumerate(steps)
+    ]
+    rows.append(["r*"] + [_r(results[s]["r_star"], scale) for s in sensors])
+    rows.append(["E_hard(r*) [m]"] + [results[s]["E_hard_star"] for s in sensors])
+    rows.append(["E_soft(r*) [m]"] + [results[s]["E_soft_star"] for s in sensors])
+    rows.append(["r* on bound"] + [results[s]["on_bound"] for s in sensors])
+    winner = min(sensors, key=lambda s: results[s]["E_hard_star"])
+    return "\n".join(
+        [
+            f"{' vs '.join(sensors)}: {label}, "
+            "E_RMSE [m] between GT-input and sensor-input predictions",
+            format_table([""] + sensors, rows),
+            f"best: {winner} at r* = {_r(results[winner]['r_star'], scale)} "
+            f"(E_hard = {_cell(results[winner]['E_hard_star'])} m)",
+        ]
+    )
