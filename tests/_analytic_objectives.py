@@ -53,3 +53,21 @@ def dip_at(r_dip: float, center: float, penalty: float = 0.5):
         return e_hard_bowl(r) + penalty * (jnp.abs(jnp.asarray(r) - r_dip) > 0.01)
 
     return e2_soft, e_hard
+
+
+def ripple(center: float, amplitude: float = 0.02, wavenumber: float = 40.0, width: float = 0.02):
+    """A bowl with ripples (local minima every 9 deg) that a temperature smooths away.
+
+    The soft objective is the hard one convolved with a Gaussian of std `width * tau` rad, which
+    damps the ripple by exp(-(width tau k)^2 / 2): 0.73 at tau = 1, 0.006 at tau = 4.
+    """
+
+    def e2_soft(r, tau):
+        damping = jnp.exp(-0.5 * (tau * width * wavenumber) ** 2)
+        return 1.0 + (r - center) ** 2 + amplitude * damping * jnp.sin(wavenumber * r)
+
+    def e_hard(r):
+        r = jnp.asarray(r)
+        return jnp.sqrt(1.0 + (r - center) ** 2 + amplitude * jnp.sin(wavenumber * r))
+
+    return e2_soft, e_hard

@@ -20,7 +20,7 @@ from diffsense.solve import (
     solve,
     sweep,
 )
-from tests._analytic_objectives import HI, LO, STEP_W, bowl, dip_at, staircase
+from tests._analytic_objectives import HI, LO, STEP_W, bowl, dip_at, ripple, staircase
 
 BUDGET = 20
 XTOL = SolveConfig().xtol_rel * (HI - LO)
@@ -96,6 +96,19 @@ def test_continuation_levels_track_the_minimum(solved):
     assert [lv.tau for lv in res.levels] == [4.0, 2.0, 1.0]
     assert all(lv.converged and lv.bound == 0 for lv in res.levels)
     assert res.notes == ()
+
+
+def test_continuation_finds_the_basin_a_single_temperature_misses():
+    # Ripples make local minima at tau = 1; from the best step a tau = 1 solve stops in the
+    # nearest one, the continuation (4, 2, 1) follows the smoothed bowl into the best basin.
+    e2, eh = ripple(1.3)
+    dense = dense_grid_search(eh, (LO, HI), float(np.deg2rad(0.5)))
+    res = solve(e2, eh, (LO, HI))
+    assert basin_check(dense, res.r_star, res.E_hard_star, res.bracket) is None
+    assert res.E_hard_star <= dense.E_hard.min() + 1e-4
+    assert res.evaluations["objective"] + res.evaluations["gradient"] <= BUDGET
+    single = solve(e2, eh, (LO, HI), config=SolveConfig(tau_schedule=(1.0,)))
+    assert "outside the basin" in basin_check(dense, single.r_star, single.E_hard_star)
 
 
 def test_bisection_method_keeps_the_guarantees(solved):
