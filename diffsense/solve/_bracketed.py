@@ -14,8 +14,10 @@ gradient is compiled once), and `stats["num_steps"]` is the number of gradient e
 It stops when the bracket is at most 2 * atol wide (the answer, its midpoint, is then within
 atol of a sign change), at an exact zero of g, on a bound, or on a non-finite g.
 
-Options: `lower`, `upper` (the bracket, required) and `probe` (first probe step, default a
-quarter of the bracket).
+Options: `lower`, `upper` (the bracket, required), `probe` (first probe step, default a
+quarter of the bracket), `xtol` (overrides `atol`) and `max_evaluations` (stop after this many
+steps). Options are traced values: changing them between solves does not recompile, while
+changing the solver's fields or `max_steps` does.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ class _State(eqx.Module):
     g_prev: Scalar
     side: Int[Array, ""]  # which end moved last: -1 lo, +1 hi, 0 none (Illinois rule)
     probe: Scalar  # current probe step while one side is unknown
+    evaluations: Int[Array, ""]  # g evaluations so far
     bound: Int[Array, ""]  # -1 minimum on lower, +1 on upper, 0 interior
     done: Bool[Array, ""]
     nonfinite: Bool[Array, ""]
@@ -66,6 +69,9 @@ class BracketedSecant(optx.AbstractRootFinder):
     atol: float
     norm: ClassVar[Callable[[PyTree], Scalar]] = jnp.abs
 
+    def _xtol(self, options: dict, dtype) -> Array:
+        return jnp.asarray(options.get("xtol", self.atol), dtype)
+
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> _State:
         del fn, args, aux_struct, tags
         dtype = f_struct.dtype
@@ -81,7 +87,8 @@ class BracketedSecant(optx.AbstractRootFinder):
             y_prev=nan,
             g_prev=nan,
             side=jnp.array(0),
-            probe=jnp.maximum(probe, 2.0 * self.atol),
+            probe=jnp.maximum(probe, 2.0 * self._xtol(options, dtype)),
+            evaluations=jnp.array(0),
             bound=jnp.array(0),
             done=jnp.array(False),
             nonfinite=jnp.array(False),
@@ -93,7 +100,7 @@ class BracketedSecant(optx.AbstractRootFinder):
         upper = jnp.asarray(options["upper"], y.dtype)
         # A tolerance below the float resolution at the bracket could never be met.
         resolution = 4.0 * jnp.finfo(y.dtype).eps * jnp.maximum(jnp.abs(lower), jnp.abs(upper))
-        tol = jnp.maximum(jnp.asarray(self.atol, y.dtype), resolution)
+        tol = jnp.maximum(self._xtol(options, y.dtype), resolution)
         g, aux = fn(y, args)
         finite = jnp.isfinite(g)
         neg, pos = g < 0, g > 0
@@ -141,6 +148,7 @@ class BracketedSecant(optx.AbstractRootFinder):
             g_prev=g,
             side=side,
             probe=probe,
+            evaluations=state.evaluations + 1,
             bound=jnp.where(finite, bound, 0),
             done=done,
             nonfinite=~finite,
@@ -148,8 +156,9 @@ class BracketedSecant(optx.AbstractRootFinder):
         return new_y, new_state, aux
 
     def terminate(self, fn, y, args, options, state: _State, tags):
-        del fn, y, args, options, tags
-        return state.done, optx.RESULTS.successful
+        del fn, y, args, tags
+        spent = state.evaluations >= options.get("max_evaluations", jnp.iinfo(jnp.int32).max)
+        return state.done | spent, optx.RESULTS.successful
 
     def postprocess(self, fn, y, aux, args, options, state, tags, result) -> tuple[Any, Any, dict]:
         del fn, args, options, state, tags, result

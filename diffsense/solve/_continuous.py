@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
@@ -174,17 +175,33 @@ class _Counted:
         return float(self._grad(self.as_r(r), self.as_r(tau)))
 
 
-def _level_secant(g, counted, y0, tau, lower, upper, probe, tol, max_steps):
-    solver = BracketedSecant(rtol=0.0, atol=tol)
+class _Gradient(eqx.Module):
+    """dE^2/dr as a module: equal objectives give equal modules, so a second solve of the same
+    objective reuses the compiled root find instead of compiling it again."""
+
+    e2_soft: Callable[[Any, Any], Any]
+
+    def __call__(self, r, tau):
+        return jax.grad(self.e2_soft)(r, tau)
+
+
+def _level_secant(g, counted, y0, tau, lower, upper, probe, tol, max_steps, budget):
+    # Everything that changes between levels is a traced option, so the levels share one
+    # compiled program (`max_steps` and the solver's fields are static).
+    options = dict(
+        lower=counted.as_r(lower),
+        upper=counted.as_r(upper),
+        probe=counted.as_r(probe),
+        xtol=counted.as_r(tol),
+        max_evaluations=jnp.asarray(max_steps, jnp.int32),
+    )
     sol = optx.root_find(
         g,
-        solver,
+        BracketedSecant(rtol=0.0, atol=0.0),
         counted.as_r(y0),
         args=counted.as_r(tau),
-        options=dict(
-            lower=counted.as_r(lower), upper=counted.as_r(upper), probe=counted.as_r(probe)
-        ),
-        max_steps=max_steps,
+        options=options,
+        max_steps=budget,
         throw=False,
     )
     n = int(sol.stats["num_steps"])
@@ -271,9 +288,7 @@ def solve(
     xtol = config.xtol_rel * (hi - lo)
     notes: list[str] = []
 
-    def g(r, tau):
-        return jax.grad(e2_soft)(r, tau)
-
+    g = _Gradient(e2_soft)
     levels: list[LevelResult] = []
     y, probe = best.r, 0.25 * (upper - lower)
     for i, tau in enumerate(taus):
@@ -286,7 +301,7 @@ def solve(
             break
         if config.method == "secant":
             r, n, bound, done = _level_secant(
-                g, counted, y, tau, lower, upper, probe, tol, max_steps
+                g, counted, y, tau, lower, upper, probe, tol, max_steps, config.max_evaluations
             )
         else:
             (r, bound), n, done = _level_bisection(g, counted, y, tau, lower, upper, tol, max_steps)
