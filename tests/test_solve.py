@@ -91,6 +91,30 @@ def test_staircase_answer_sits_on_the_best_plateau(solved):
     assert res.bracket == pytest.approx((np.deg2rad(30.0), np.deg2rad(90.0)))
 
 
+@pytest.mark.parametrize("center", [1.3, 4.0])
+def test_evaluation_counts_are_exact(center):
+    # Count real executions of the soft objective (a callback runs once per forward pass,
+    # inside the compiled root find too) and calls of the hard one.
+    calls = {"soft": 0, "hard": 0}
+    e2, eh = ripple(center)
+
+    def bump(_):
+        calls["soft"] += 1
+
+    def e2_counted(r, tau):
+        jax.debug.callback(bump, r)
+        return e2(r, tau)
+
+    def eh_counted(r):
+        calls["hard"] += 1
+        return eh(r)
+
+    res = solve(e2_counted, eh_counted, (LO, HI))
+    n = len(res.sweep)
+    assert calls["hard"] - n + calls["soft"] - n == sum(res.evaluations.values())
+    assert calls["soft"] - n >= res.evaluations["gradient"]
+
+
 def test_continuation_levels_track_the_minimum(solved):
     res = solved("bowl")
     assert [lv.tau for lv in res.levels] == [4.0, 2.0, 1.0]
