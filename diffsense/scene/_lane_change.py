@@ -27,3 +27,15 @@ def quintic_lateral_offset_m(
 ) -> Float[Array, "*T"]:
     """Lateral offset d(t) of a lane change from `d_from_m` to `d_to_m` [m]."""
     return d_from_m + (d_to_m - d_from_m) * quintic_progress(t_s, start_s, duration_s)
+
+
+def quintic_lateral_speed_mps(
+    t_s: Float[ArrayLike, "*T"],
+    start_s: Float[ArrayLike, ""],
+    duration_s: Float[ArrayLike, ""],
+    d_from_m: Float[ArrayLike, ""],
+    d_to_m: Float[ArrayLike, ""],
+) -> Float[Array, "*T"]:
+    """Lateral speed dd/dt of the same lane change [m/s] (zero before and after it)."""
+    u = jnp.clip((jnp.asarray(t_s) - start_s) / duration_s, 0.0, 1.0)
+    return (d_to_m - d_from_m) * 30.0 * u**2 * (1.0 - u) ** 2 / duration_s

@@ -1,0 +1,140 @@
+"""The scene's relevant vehicles: what can reach the target's social grid, and what can hide it.
+
+A scene decides the size of the computation (DESIGN.md, "Model only what a scene requires"): a
+vehicle is kept when, in some frame of a 3 s history window, it is in the target's 13 x 3 social
+grid (its lane within one of the target's and its longitudinal offset within 6.5 cells of 15 ft,
+the CS-LSTM grid), or when it can occlude such a vehicle (or the target) from the ego's sensors.
+The occlusion test is conservative: a vehicle whose body overlaps the road-frame box spanned by
+the ego (sensors up to `sensor_reach_m` ahead of its centre) and the hidden vehicle's body,
+widened by `margin_m` for the road's curvature, may occlude it.
+Everything else (far background traffic) is dropped, and the kept vehicles are padded only to the
+largest count in the batch, so the cost downstream does not grow with far traffic.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Int
+
+from diffsense.scene._datatypes import BACKGROUND, CAR, EGO_INDEX, TARGET_INDEX, Scene
+
+GRID_CELL_M = 15.0 * 0.3048  # the CS-LSTM social grid's 15 ft cells
+GRID_HALF_LENGTH_M = 6.5 * GRID_CELL_M  # 13 cells centred on the target: +-97.5 ft = 29.7 m
+HISTORY_S = 3.0  # the CS-LSTM's history (16 points at 5 Hz)
+# Radar 4.2 m and camera 2.5 m ahead of the ego reference point (DESIGN.md, sensor mounting).
+SENSOR_REACH_M = 4.2
+# Pads sit this far behind the ego, on its lane: absent, but finite and far from everything.
+_PAD_BEHIND_M = 1000.0
+
+
+def _window_frames(num_frames: int, frames: Int[ArrayLike, " I"] | None, dt_s: float) -> Bool[Array, " T"]:
+    """Frames inside the history window of some prediction instant (all frames if none given)."""
+    if frames is None:
+        return jnp.ones((num_frames,), bool)
+    t = jnp.arange(num_frames)
+    f = jnp.asarray(frames)
+    back = round(HISTORY_S / dt_s)
+    return jnp.any((t[:, None] <= f[None, :]) & (t[:, None] >= f[None, :] - back), axis=-1)
+
+
+def _overlap(lo_a, hi_a, lo_b, hi_b):
+    return (hi_a > lo_b) & (lo_a < hi_b)
+
+
+def _relevant_one(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach_m: float) -> Bool[Array, " V"]:
+    s, d, lane = scene.s_m, scene.d_m, scene.lane  # [T, V]
+    half_l, half_w = 0.5 * scene.length_m, 0.5 * scene.width_m  # [V]
+    in_grid = (
+        (jnp.abs(lane - lane[:, TARGET_INDEX, None]) <= 1)
+        & (jnp.abs(s - s[:, TARGET_INDEX, None]) < GRID_HALF_LENGTH_M + margin_m)
+        & window[:, None]
+        & scene.present
+    )
+    index = jnp.arange(scene.num_vehicles)
+    core = jnp.any(in_grid, axis=0) | (index == TARGET_INDEX)  # seen in some history window
+    # Box from the ego (with its sensors) to each vehicle j, per frame: [T, V].
+    e = EGO_INDEX
+    box_s_lo = jnp.minimum(s[:, e, None] - half_l[e], s - half_l)
+    box_s_hi = jnp.maximum(s[:, e, None] + sensor_reach_m, s + half_l)
+    box_d_lo = jnp.minimum(d[:, e, None] - half_w[e], d - half_w) - margin_m
+    box_d_hi = jnp.maximum(d[:, e, None] + half_w[e], d + half_w) + margin_m
+    # Vehicle k (last axis) overlaps the box of j (middle axis): [T, V, V].
+    hides = (
+        _overlap(box_s_lo[..., None], box_s_hi[..., None], (s - half_l)[:, None, :], (s + half_l)[:, None, :])
+        & _overlap(box_d_lo[..., None], box_d_hi[..., None], (d - half_w)[:, None, :], (d + half_w)[:, None, :])
+    )
+    matters = window[:, None, None] & core[None, :, None] & (index != EGO_INDEX)[None, :, None]
+    occluder = jnp.any(hides & matters, axis=(0, 1)) & (index != EGO_INDEX)
+    return (core | occluder | (index == EGO_INDEX)) & scene.present
+
+
+def relevant_mask(
+    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = 1.0,
+    sensor_reach_m: float = SENSOR_REACH_M,
+) -> Bool[Array, "*N V"]:
+    """Which vehicles are relevant (jit-able): [V] for a scene [T, V], [N, V] for a batch.
+
+    `frames`: prediction instants (frame indices); their 3 s history windows are searched. None:
+    every frame (any instant may be asked for).
+    """
+    window = _window_frames(scene.num_frames, frames, scene.dt_s)
+    return _mask(scene, window, margin_m, sensor_reach_m)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3))
+def _mask(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach_m: float) -> Bool[Array, "*N V"]:
+    one = lambda sc: _relevant_one(sc, window, margin_m, sensor_reach_m)  # noqa: E731
+    if scene.s_m.ndim == 2:
+        return one(scene)
+    return jax.lax.map(one, scene)  # one scene at a time: [T, V, V] temporaries, not [N, T, V, V]
+
+
+def relevant_vehicles(
+    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = 1.0,
+    sensor_reach_m: float = SENSOR_REACH_M,
+) -> Scene:
+    """The scene restricted to its relevant vehicles, in their original order (ego 0, target 1).
+
+    The vehicle axis shrinks to the largest relevant count in the batch; a variant with fewer
+    relevant vehicles is padded with absent ones (present False, role BACKGROUND, 1 km behind the
+    ego). Not jit-able as a whole (its output size depends on the data): `relevant_mask` is.
+    """
+    mask = np.asarray(relevant_mask(scene, frames, margin_m=margin_m, sensor_reach_m=sensor_reach_m))
+    batched = mask.ndim == 2
+    mask = mask if batched else mask[None]
+    width = int(mask.sum(axis=-1).max())
+    # Stable sort puts kept vehicles first in their order; the rest fill the pad slots.
+    order = np.argsort(~mask, axis=-1, kind="stable")[:, :width]
+    keep = np.take_along_axis(mask, order, axis=-1)
+    sc = scene if batched else jax.tree.map(lambda a: a[None], scene)
+    out = _gather(sc, jnp.asarray(order), jnp.asarray(keep))
+    return out if batched else jax.tree.map(lambda a: a[0], out)
+
+
+@jax.jit
+def _gather(scene: Scene, order: Int[Array, "N K"], keep: Bool[Array, "N K"]) -> Scene:
+    per_frame = lambda a: jnp.take_along_axis(a, order[:, None, :], axis=-1)  # noqa: E731
+    per_vehicle = lambda a: jnp.take_along_axis(a, order, axis=-1)  # noqa: E731
+    keep_t = keep[:, None, :]
+    ego = lambda a: a[..., EGO_INDEX : EGO_INDEX + 1]  # noqa: E731
+    back = _PAD_BEHIND_M
+    angle = ego(scene.road_angle_rad)
+    fill = dict(
+        s_m=ego(scene.s_m) - back, d_m=ego(scene.d_m), x_m=ego(scene.x_m) - back * jnp.cos(angle),
+        y_m=ego(scene.y_m) - back * jnp.sin(angle), heading_rad=ego(scene.heading_rad),
+        road_angle_rad=angle, speed_mps=ego(scene.speed_mps), lane=ego(scene.lane),
+    )
+    frame_fields = {k: jnp.where(keep_t, per_frame(getattr(scene, k)), v) for k, v in fill.items()}
+    return Scene(
+        **frame_fields,
+        length_m=jnp.where(keep, per_vehicle(scene.length_m), ego(scene.length_m)),
+        width_m=jnp.where(keep, per_vehicle(scene.width_m), ego(scene.width_m)),
+        kind=jnp.where(keep, per_vehicle(scene.kind), CAR),
+        role=jnp.where(keep, per_vehicle(scene.role), BACKGROUND),
+        present=keep & per_vehicle(scene.present),
+        dt_s=scene.dt_s,
+    )

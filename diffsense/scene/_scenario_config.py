@@ -1,0 +1,200 @@
+"""Scenario configs (configs/scenarios/*.toml) and the vehicle models they share.
+
+A scenario places an ego, a target that changes lane into the ego's lane (in front of the ego or
+in front of the ego's lead), the lead, the vehicle ahead of the target in its own lane and one in
+an adjacent lane, plus optional background traffic. Every randomised quantity is a `Range`: the
+nominal value makes variant 0, the randomised variants draw uniformly from [low, high].
+Speeds are in km/h in the files (what a scenario author thinks in) and SI inside.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Literal
+
+from diffsense.config import list_defaults, load_default
+from diffsense.errors import InputError
+from diffsense.scene._named_config import load_named
+
+KindName = Literal["car", "van", "truck"]
+# Quintic lane-change durations outside this band are not what the paper's scenarios describe.
+LANE_CHANGE_DURATION_BOUNDS_S = (3.0, 6.0)
+_VEHICLE_MODELS = "scenarios/common/vehicles.toml"
+
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """A randomised quantity: `nominal` for variant 0, uniform in [low, high] for the others."""
+
+    nominal: float
+    low: float
+    high: float
+
+    def __post_init__(self):
+        if not self.low <= self.nominal <= self.high:
+            raise InputError(f"range needs low <= nominal <= high, got {self.low}, {self.nominal}, {self.high}")
+
+
+@dataclasses.dataclass(frozen=True)
+class EgoSpec:
+    """The ego vehicle (vehicle 0).
+
+    Attributes:
+        lane: its lane (0 = rightmost); the target changes into it.
+        s_m: arc length of the ego's centre at t = 0 [m].
+        speed_kmh: its speed at t = 0 [km/h].
+        kind: vehicle kind (the paper's ego is a passenger car).
+    """
+
+    lane: int
+    s_m: Range
+    speed_kmh: Range
+    kind: KindName = "car"
+
+
+@dataclasses.dataclass(frozen=True)
+class VehicleSpec:
+    """A scenario vehicle placed relative to another one.
+
+    Attributes:
+        position_m: where it starts; what it is measured from is the role's (see ScenarioConfig) [m].
+        relative_speed_kmh: its speed at t = 0 minus the ego's [km/h].
+        kind: kind in the nominal variant.
+        random_kinds: kinds a randomised variant draws from (uniformly).
+    """
+
+    position_m: Range
+    relative_speed_kmh: Range
+    kind: KindName = "car"
+    random_kinds: tuple[KindName, ...] = ("car",)
+
+    def __post_init__(self):
+        if not self.random_kinds:
+            raise InputError("random_kinds must name at least one kind")
+
+
+@dataclasses.dataclass(frozen=True)
+class LaneChangeSpec:
+    """The target's lane change (quintic lateral profile)."""
+
+    start_s: Range
+    duration_s: Range
+
+    def __post_init__(self):
+        lo, hi = LANE_CHANGE_DURATION_BOUNDS_S
+        if not (lo <= self.duration_s.low and self.duration_s.high <= hi):
+            raise InputError(f"lane_change.duration_s must lie in [{lo}, {hi}] s, got "
+                             f"[{self.duration_s.low}, {self.duration_s.high}]")
+        if self.start_s.low < 0.0:
+            raise InputError(f"lane_change.start_s must be >= 0 s, got {self.start_s.low}")
+
+
+@dataclasses.dataclass(frozen=True)
+class BackgroundSpec:
+    """Far background traffic: `count` lane-keeping IDM vehicles behind the ego, cycling over
+    every lane. They cannot reach the target's social grid; they exist to show that the cost
+    downstream does not grow with them (see `relevant_vehicles`)."""
+
+    count: int = 0
+    gap_m: float = 150.0
+    spacing_m: float = 40.0
+    relative_speed_kmh: Range = Range(0.0, -5.0, 5.0)
+    kind: KindName = "car"
+
+    def __post_init__(self):
+        if not 0 <= self.count <= 10_000:
+            raise InputError(f"background.count must be in [0, 10000], got {self.count}")
+        if not (self.gap_m > 0.0 and self.spacing_m > 0.0):
+            raise InputError("background.gap_m and background.spacing_m must be > 0")
+
+
+@dataclasses.dataclass(frozen=True)
+class ScenarioConfig:
+    """One of the paper's lane-change scenarios.
+
+    Positions (`position_m`, bumper to bumper unless said otherwise, positive ahead):
+        lead: gap from the ego's front to the lead's rear (same lane as the ego).
+        target: gap from the front of `target_ahead_of` (the ego or the lead) to the target's rear.
+        target_lead: gap from the target's front to its rear (the target's starting lane).
+        adjacent: centre-to-centre offset from the target (in `adjacent_lane`).
+    """
+
+    name: str
+    road: str
+    direction: Literal["left", "right"]
+    target_ahead_of: Literal["ego", "lead"]
+    target_lane: int
+    adjacent_lane: int
+    ego: EgoSpec
+    target: VehicleSpec
+    lead: VehicleSpec
+    target_lead: VehicleSpec
+    adjacent: VehicleSpec
+    lane_change: LaneChangeSpec
+    description: str = ""
+    duration_s: float = 20.0
+    background: BackgroundSpec = BackgroundSpec()
+
+    def __post_init__(self):
+        step = -1 if self.direction == "right" else 1  # lane 0 is the rightmost
+        if self.target_lane + step != self.ego.lane:
+            raise InputError(f"a lane change to the {self.direction} into the ego's lane {self.ego.lane} "
+                             f"must start in lane {self.ego.lane - step}, got target_lane {self.target_lane}")
+        if self.adjacent_lane in (self.ego.lane, self.target_lane):
+            raise InputError(f"adjacent_lane must differ from the ego's and the target's, got {self.adjacent_lane}")
+        if not 1.0 <= self.duration_s <= 120.0:
+            raise InputError(f"duration_s must be in [1, 120] s, got {self.duration_s}")
+
+
+@dataclasses.dataclass(frozen=True)
+class KindModel:
+    """Body size of a vehicle kind [m]."""
+
+    length_m: float
+    width_m: float
+
+
+@dataclasses.dataclass(frozen=True)
+class DriverModel:
+    """IDM parameters shared by every scenario vehicle, and the simulation's limits.
+
+    The desired speed is not here: each vehicle's is derived from its start (see _variants.py).
+    """
+
+    time_headway_s: float
+    min_gap_m: float
+    max_accel_mps2: float
+    comfort_decel_mps2: float
+    accel_exponent: float
+    max_brake_mps2: float
+    max_desired_speed_ratio: float
+    lateral_margin_m: float
+
+
+@dataclasses.dataclass(frozen=True)
+class VehicleModels:
+    """configs/scenarios/common/vehicles.toml: kinds' sizes and the driver model."""
+
+    car: KindModel
+    van: KindModel
+    truck: KindModel
+    driver: DriverModel
+
+    def size(self, kind: str) -> KindModel:
+        return getattr(self, kind)
+
+
+def list_scenarios() -> list[str]:
+    """Names of the shipped scenarios (configs/scenarios/*.toml)."""
+    return list_defaults("scenarios")
+
+
+def load_scenario(name_or_path: str | Path) -> ScenarioConfig:
+    """A shipped scenario by name (`"sc01"`) or a scenario TOML file by path."""
+    return load_named(ScenarioConfig, "scenarios", name_or_path, "scenario")
+
+
+def load_vehicle_models() -> VehicleModels:
+    """The shipped vehicle kinds and driver model."""
+    return load_default(VehicleModels, _VEHICLE_MODELS)
