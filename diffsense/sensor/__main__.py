@@ -113,7 +113,7 @@ def _plot(path: str, sensor: str, settings, config, probe: dict) -> None:
         ax.add_patch(plt.Rectangle((-2.25, -0.9), 4.5, 1.8, color="red"))
         ax.set_title(f"{sensor} HFOV {float(params.hfov_deg):g} deg")
         ax.set_xlabel("forward x [m]")
-        ax.set_ylabel("left y [m]")
+    axes[0][0].set_ylabel("left y [m]")
     fig.colorbar(im, ax=axes[0].tolist(), label="p_detect (soft)", shrink=0.8)
     save_figure(fig, path, dpi=120)
     plt.close(fig)

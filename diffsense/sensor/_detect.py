@@ -56,7 +56,8 @@ def detect_batch(
 ) -> Detections:
     """`detect` over a batch of scenes [N, T, V] with shared parameters; one noise key each.
 
-    Scene n draws its noise from `jax.random.fold_in(key, n)`.
+    Scene n draws its noise from `jax.random.fold_in(key, n)` (with the default threefry keys
+    exactly the draws of `detect(scenes[n], ..., fold_in(key, n))`).
     """
     n = scenes.x_m.shape[0]
     keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(jax.numpy.arange(n))

@@ -108,6 +108,6 @@ def vehicle_occlusion(scene: Scene, range_m, azimuth_rad, mount_x_m: float, mode
     Occluders are the present vehicles other than the ego.
     """
     half = angular_half_width(scene, range_m, azimuth_rad, mount_x_m)
-    occluder = scene.present & (jnp.arange(scene.x_m.shape[-1]) != EGO_INDEX)
+    occluder = (scene.present != 0) & (jnp.arange(scene.x_m.shape[-1]) != EGO_INDEX)
     return half, occluded_fraction(range_m, azimuth_rad, half, occluder, mode, tau_near_m,
                                    jnp.deg2rad(tau_overlap_deg))

@@ -19,7 +19,7 @@ from diffsense.sensor._geometry import to_world
 
 def own_and_padding(scene: Scene, p: Float[Array, "T V"]) -> Float[Array, "T V"]:
     """p with the ego set to 1 (its own state is known) and padding vehicles to 0."""
-    p = jnp.where(scene.present[..., None, :], p, 0.0)
+    p = jnp.where(scene.present[..., None, :] != 0, p, 0.0)
     return p.at[..., EGO_INDEX].set(1.0)
 
 
@@ -47,7 +47,7 @@ def detections(
         azimuth_rad + azimuth_sigma_rad * noise[1],
     )
     known = jnp.arange(scene.x_m.shape[-1]) == EGO_INDEX
-    known = known | ~scene.present[..., None, :]
+    known = known | (scene.present[..., None, :] == 0)
     x = jnp.where(known, scene.x_m, x)
     y = jnp.where(known, scene.y_m, y)
     return Detections(p_detect=own_and_padding(scene, p), x_m=x, y_m=y)

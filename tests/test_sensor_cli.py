@@ -1,0 +1,77 @@
+"""The sensor inspector: numbers, JSON, coverage plot, and one-line refusals with exit code 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from diffsense._cli import run
+from diffsense.sensor.__main__ import main
+
+
+def _json(capsys, *argv):
+    assert main(["inspect", *argv, "--json"]) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_radar_report_on_boresight(capsys):
+    out = _json(capsys, "--sensor", "radar", "--hfov", "30,60", "--at-range", "100")
+    narrow, wide = out["results"]
+    assert narrow["snr_db"] == pytest.approx(16.78, abs=0.01)
+    assert narrow["snr_db"] - wide["snr_db"] == pytest.approx(6.0206, abs=1e-3)
+    assert narrow["effective_range_m"] == 100.0 < narrow["snr_range_m"]
+    assert wide["effective_range_m"] == pytest.approx(wide["snr_range_m"])
+    assert wide["effective_range_m"] < 100.0
+    assert narrow["p_detect_hard"] == 1.0 and wide["p_detect_hard"] == 0.0
+
+
+def test_camera_report_and_table(capsys):
+    out = _json(capsys, "--sensor", "camera", "--hfov", "30", "--at-range", "50")
+    row = out["results"][0]
+    assert row["px_per_rad"] == pytest.approx(2444.6, abs=0.1)
+    assert row["depth_sigma_m"] == pytest.approx(50**2 * 0.5 / (row["px_per_rad"] * 0.12))
+    assert main(["inspect", "--sensor", "camera", "--set", "range_m=80"]) == 0
+    text = capsys.readouterr().out
+    assert "px_per_rad" in text and "depth_sigma_m" in text and "at 80 m" in text
+
+
+def test_coverage_plot_is_written(tmp_path, capsys):
+    path = tmp_path / "coverage.png"
+    assert main(["inspect", "--sensor", "radar", "--hfov", "30,90,180", "--plot", str(path)]) == 0
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["coverage.png"]  # no temporary left over
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--sensor", "radar", "--hfov", "0"], "hfov_deg = 0 is outside its domain"),
+        (["--sensor", "radar", "--hfov", "400"], "hfov_deg = 400 is outside its domain"),
+        (["--sensor", "radar", "--set", "range_m=-3"], "range_m = -3 is outside"),
+        (["--sensor", "camera", "--hfov", "thirty"], "--hfov: expected numbers"),
+        (["--sensor", "camera", "--set", "focal=3"], "unknown camera parameter 'focal'"),
+        (["--sensor", "sonar"], "invalid choice: 'sonar'"),
+        (["--sensor", "radar", "--at-range", "-1"], "--at-range must be a positive"),
+        (["--sensor", "radar", "--plot", "out.jpeg"], "expected a .png, .pdf or .svg"),
+        (["--sensor", "radar", "--config", "missing.toml"], "config file not found"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_code_2(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exit_:
+        run(lambda: main(["inspect", *argv]))
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_module_entry_point_exits_2_without_traceback():
+    proc = subprocess.run([sys.executable, "-m", "diffsense.sensor", "inspect", "--sensor",
+                           "radar", "--hfov", "-5"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == "error: radar hfov_deg = -5 is outside its domain (0, 360] deg"
+    assert "Traceback" not in proc.stderr
