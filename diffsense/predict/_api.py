@@ -1,0 +1,132 @@
+"""The predictor's functional entry points, in SI at the boundary.
+
+`load_predictor` gives a `Predictor` pytree (graphdef static, parameters as leaves), so every
+function here is pure and can be passed through plain `jax.jit` / `jax.grad` / `jax.vmap`; the
+network is rebuilt inside with `nnx.merge` (no nnx.jit overhead in hot loops). Parameters are
+cast to the dtype of the histories: float32 in, float32 out; float64 in, float64 out.
+
+Inputs (SI road frame of the target at the prediction instant, last axis (lon_m, lat_m) =
+(forward, left), 5 Hz, oldest first, the last point at the prediction instant):
+  hist_m [B, 16, 2]; compact neighbours nbr_hist_m [B, N, 16, 2], nbr_slot [B, N] int
+  (lane * 13 + cell, lane 0 left; slots outside 0..38 are padding), nbr_weight [B, N] in [0, 1];
+  or dense neighbours nbrs_m [B, 39, 16, 2] with occupancy [B, 39] in [0, 1].
+Output: future mean [B, 25, 2] (0.2 .. 5 s) in the same SI frame.
+
+Manoeuvre variant: `mode="most_probable"` (the default) returns the trajectory of the most
+probable lateral and the most probable longitudinal class, as the reference evaluation does
+(its gradient flows through that trajectory; the choice itself is piecewise constant);
+`mode="weighted"` returns the probability-weighted mean of the 6 trajectories (smooth in the
+inputs). The single-mode variant has one trajectory and ignores `mode`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Literal
+
+import jax
+import jax.numpy as jnp
+from flax import nnx
+from jaxtyping import Array, Float, Int
+
+from diffsense.errors import InputError
+from diffsense.predict._checkpoint import read_state_dict
+from diffsense.predict._convert import model_from_state_dict
+from diffsense.predict._frame import model_to_si, si_to_model
+from diffsense.predict._model import N_LAT, CSLSTM, Prediction
+from diffsense.predict._weights import DEFAULT_WEIGHTS, load_weights
+
+Mode = Literal["most_probable", "weighted"]
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Predictor:
+    """A CS-LSTM as data: `graphdef` (static structure) and `state` (its parameter arrays).
+
+    `maneuvers` is True for the manoeuvre-based variant (6 modes), False for single-mode.
+    """
+
+    state: nnx.State
+    graphdef: nnx.GraphDef = dataclasses.field(metadata=dict(static=True))
+    maneuvers: bool = dataclasses.field(metadata=dict(static=True))
+
+    @classmethod
+    def from_model(cls, model: CSLSTM) -> Predictor:
+        graphdef, state = nnx.split(model)
+        return cls(state=state, graphdef=graphdef, maneuvers=bool(model.maneuvers))
+
+    def model(self, dtype=None) -> CSLSTM:
+        """The network (parameters cast to `dtype` when given); usable inside jit."""
+        state = self.state
+        if dtype is not None:
+            state = jax.tree.map(lambda p: p.astype(dtype), state)
+        return nnx.merge(self.graphdef, state)
+
+
+def load_predictor(path: str | Path | None = None) -> Predictor:
+    """The default shipped predictor (`path=None`), a `.msgpack` weight file of this project, or a
+    published PyTorch checkpoint (any other file; read without torch, variant from the shapes)."""
+    if path is None:
+        if not DEFAULT_WEIGHTS.is_file():
+            raise InputError(
+                f"no shipped weights at {DEFAULT_WEIGHTS}: train them with `python -m diffsense.train "
+                "--config configs/train/default.toml` or pass a checkpoint path"
+            )
+        return Predictor.from_model(load_weights(DEFAULT_WEIGHTS))
+    path = Path(path)
+    if path.suffix == ".msgpack":
+        return Predictor.from_model(load_weights(path))
+    return Predictor.from_model(model_from_state_dict(read_state_dict(path), str(path)))
+
+
+def predict_model_frame(
+    predictor: Predictor,
+    hist: Float[Array, "B 16 2"],
+    nbr_hist: Float[Array, "B N 16 2"],
+    nbr_slot: Int[Array, "B N"],
+    nbr_weight: Float[Array, "B N"],
+) -> Prediction:
+    """All network outputs (every mode, inverse sigmas, rho, class probabilities), compact input
+    in the MODEL frame (feet, lateral right): for parity checks and training, not for the pipeline."""
+    return predictor.model(hist.dtype).compact(hist, nbr_hist, nbr_slot, nbr_weight)
+
+
+def _select(pred: Prediction, mode: Mode) -> Float[Array, "B 25 2"]:
+    mu = pred.fut[..., :2]  # [B, K, 25, 2]
+    if mu.shape[1] == 1:
+        return mu[:, 0]
+    if mode == "weighted":
+        return jnp.einsum("bk,bktc->btc", pred.mode_prob, mu)
+    if mode != "most_probable":
+        raise ValueError(f"mode must be 'most_probable' or 'weighted', got {mode!r}")
+    idx = jnp.argmax(pred.lon_prob, axis=-1) * N_LAT + jnp.argmax(pred.lat_prob, axis=-1)
+    return jnp.take_along_axis(mu, idx[:, None, None, None], axis=1)[:, 0]
+
+
+def predict_mean(
+    predictor: Predictor,
+    hist_m: Float[Array, "B 16 2"],
+    nbr_hist_m: Float[Array, "B N 16 2"],
+    nbr_slot: Int[Array, "B N"],
+    nbr_weight: Float[Array, "B N"],
+    mode: Mode = "most_probable",
+) -> Float[Array, "B 25 2"]:
+    """Future mean [B, 25, 2] in SI from compact neighbours (only the N listed are encoded)."""
+    model = predictor.model(hist_m.dtype)
+    pred = model.compact(si_to_model(hist_m), si_to_model(nbr_hist_m), nbr_slot, nbr_weight)
+    return model_to_si(_select(pred, mode))
+
+
+def predict_mean_dense(
+    predictor: Predictor,
+    hist_m: Float[Array, "B 16 2"],
+    nbrs_m: Float[Array, "B 39 16 2"],
+    occupancy: Float[Array, "B 39"],
+    mode: Mode = "most_probable",
+) -> Float[Array, "B 25 2"]:
+    """Future mean [B, 25, 2] in SI from the dense grid (all 39 slots encoded)."""
+    model = predictor.model(hist_m.dtype)
+    pred = model(si_to_model(hist_m), si_to_model(nbrs_m), occupancy.astype(hist_m.dtype))
+    return model_to_si(_select(pred, mode))

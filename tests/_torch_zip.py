@@ -1,0 +1,56 @@
+"""Write a PyTorch-format zip checkpoint of a state_dict without torch (for loader tests).
+
+Emits the same pickle opcodes as torch.save of a state_dict (protocol 2): an OrderedDict whose
+values are `torch._utils._rebuild_tensor_v2((storage pid), offset, size, stride, False,
+OrderedDict())`, storages as persistent ids ('storage', torch.FloatStorage, key, 'cpu', numel).
+`extra_global` lets a test smuggle in a call to an arbitrary global (a tampered pickle).
+"""
+
+from __future__ import annotations
+
+import struct
+import zipfile
+
+import numpy as np
+
+
+def _unicode(s: str) -> bytes:
+    b = s.encode()
+    return b"X" + struct.pack("<I", len(b)) + b
+
+
+def _int(i: int) -> bytes:
+    return b"J" + struct.pack("<i", i)
+
+
+def _tuple(items: list[bytes]) -> bytes:
+    return b"(" + b"".join(items) + b"t"
+
+
+def _global(module: str, name: str) -> bytes:
+    return b"c" + module.encode() + b"\n" + name.encode() + b"\n"
+
+
+def pickle_bytes(sd: dict[str, np.ndarray], extra_global: tuple[str, str, str] | None = None) -> bytes:
+    out = [b"\x80\x02", _global("collections", "OrderedDict"), b")R", b"("]
+    for key_id, (name, arr) in enumerate(sd.items()):
+        pid = _tuple([_unicode("storage"), _global("torch", "FloatStorage"), _unicode(str(key_id)),
+                      _unicode("cpu"), _int(arr.size)])
+        stride = [int(np.prod(arr.shape[i + 1:])) for i in range(arr.ndim)]
+        args = _tuple([pid + b"Q", _int(0), _tuple([_int(n) for n in arr.shape]),
+                       _tuple([_int(s) for s in stride]), b"\x89",
+                       _global("collections", "OrderedDict") + b")R"])
+        out += [_unicode(name), _global("torch._utils", "_rebuild_tensor_v2"), args, b"R"]
+    if extra_global is not None:  # e.g. ("posix", "system", "touch /tmp/x"): key -> call result
+        module, name, arg = extra_global
+        out += [_unicode("payload"), _global(module, name), _tuple([_unicode(arg)]), b"R"]
+    out += [b"u", b"."]
+    return b"".join(out)
+
+
+def write(path, sd: dict[str, np.ndarray], extra_global=None, root: str = "archive") -> None:
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr(f"{root}/data.pkl", pickle_bytes(sd, extra_global))
+        for key_id, arr in enumerate(sd.values()):
+            z.writestr(f"{root}/data/{key_id}", np.ascontiguousarray(arr, "<f4").tobytes())
+        z.writestr(f"{root}/version", "3\n")

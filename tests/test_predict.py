@@ -1,0 +1,229 @@
+"""CS-LSTM: parity with an independent numpy forward, dense == compact, occupancy 0 == absent,
+gradients against finite differences, the SI boundary, and everything under jit."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import _numpy_cslstm
+from diffsense.predict._model import model_from_params, param_shapes
+from diffsense.predict import (
+    Predictor,
+    load_predictor,
+    model_to_si,
+    output_activation,
+    predict_mean,
+    predict_mean_dense,
+    predict_model_frame,
+    read_state_dict,
+    reference_to_compact,
+    si_to_model,
+    state_dict_from_model,
+)
+
+B, N = 3, 4
+VARIANTS = [False, True]
+
+
+def _random_predictor(maneuvers: bool, seed: int = 0) -> Predictor:
+    # PyTorch's init is small; widen it so that every layer matters in the comparison.
+    rng = np.random.default_rng(seed)
+    params = jax.tree.map(
+        lambda shape: (rng.uniform(-0.5, 0.5, size=shape)).astype(np.float32),
+        param_shapes(maneuvers),
+        is_leaf=lambda x: isinstance(x, tuple),
+    )
+    return Predictor.from_model(model_from_params(maneuvers, params))
+
+
+def _reference_batch(rng: np.random.Generator, b: int = B):
+    """A batch in the reference layout: model frame (ft), up to N neighbours per sample."""
+    mask = np.zeros((b, 3, 13, 64), bool)
+    for row in range(b):
+        slots = rng.choice([s for s in range(39) if s != 19], size=N - row % 2, replace=False)
+        mask[row].reshape(39, 64)[slots] = True
+    n = int(mask[..., 0].sum())
+    hist = (rng.normal(size=(16, b, 2)) * [3.0, 40.0]).astype(np.float32)
+    nbrs = (rng.normal(size=(16, n, 2)) * [12.0, 60.0]).astype(np.float32)
+    return hist, nbrs, mask
+
+
+@pytest.fixture(scope="module")
+def predictors():
+    return {m: _random_predictor(m) for m in VARIANTS}
+
+
+@pytest.fixture(scope="module")
+def forward64():
+    return _forward
+
+
+# One jitted function per entry point; the predictor is always an argument (a closed-over
+# predictor would become an XLA constant and be constant-folded at great compile cost).
+_forward = jax.jit(predict_model_frame)
+_mean = jax.jit(predict_mean, static_argnames="mode")
+_mean_dense = jax.jit(predict_mean_dense, static_argnames="mode")
+
+
+def _compare_with_numpy(predictor, sd, forward, hist, nbrs, mask, rtol, atol):
+    inputs = [np.asarray(a, np.float64) if a.dtype.kind == "f" else a for a in reference_to_compact(hist, nbrs, mask)]
+    pred = forward(predictor, *inputs)
+    want = _numpy_cslstm.forward(sd, hist, nbrs, mask)
+    fut = np.asarray(pred.fut).transpose(1, 2, 0, 3)  # [K, 25, B, 5]
+    if predictor.maneuvers:
+        np.testing.assert_allclose(fut, np.stack(want[0]), rtol=rtol, atol=atol)
+        np.testing.assert_allclose(pred.lat_prob, want[1], rtol=rtol, atol=atol)
+        np.testing.assert_allclose(pred.lon_prob, want[2], rtol=rtol, atol=atol)
+    else:
+        np.testing.assert_allclose(fut[0], want, rtol=rtol, atol=atol)
+
+
+@pytest.mark.parametrize("maneuvers", VARIANTS, ids=["single", "maneuver"])
+def test_parity_with_numpy_forward(predictors, forward64, maneuvers):
+    predictor = predictors[maneuvers]
+    sd = state_dict_from_model(predictor.model())
+    hist, nbrs, mask = _reference_batch(np.random.default_rng(1))
+    _compare_with_numpy(predictor, sd, forward64, hist, nbrs, mask, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("name, maneuvers", [("cslstm_no_m.tar", False), ("cslstm_m.tar", True)])
+def test_published_checkpoint_parity(ngsim_checkpoint, forward64, name, maneuvers):
+    path = ngsim_checkpoint(name)
+    predictor = load_predictor(path)
+    assert predictor.maneuvers is maneuvers
+    hist, nbrs, mask = _reference_batch(np.random.default_rng(2))
+    _compare_with_numpy(predictor, read_state_dict(path), forward64, hist, nbrs, mask, rtol=1e-9, atol=1e-8)
+
+
+def _si_batch(seed: int, dtype=np.float64):
+    rng = np.random.default_rng(seed)
+    hist = rng.normal(size=(B, 16, 2)) * [10.0, 1.0]
+    nbr_hist = rng.normal(size=(B, N, 16, 2)) * [20.0, 3.0]
+    slot = np.stack([rng.choice([s for s in range(39) if s != 19], N, replace=False) for _ in range(B)])
+    weight = rng.uniform(0.2, 1.0, size=(B, N))
+    return hist.astype(dtype), nbr_hist.astype(dtype), slot.astype(np.int32), weight.astype(dtype)
+
+
+def _to_dense(nbr_hist, slot, weight):
+    nbrs = np.zeros((B, 39, 16, 2), nbr_hist.dtype)
+    occ = np.zeros((B, 39), weight.dtype)
+    rows = np.arange(B)[:, None]
+    nbrs[rows, slot] = nbr_hist
+    occ[rows, slot] = weight
+    return nbrs, occ
+
+
+@pytest.mark.parametrize("maneuvers", VARIANTS, ids=["single", "maneuver"])
+def test_dense_equals_compact(predictors, maneuvers):
+    hist, nbr_hist, slot, weight = _si_batch(3)
+    nbrs, occ = _to_dense(nbr_hist, slot, weight)
+    # "weighted" involves all 6 trajectories and the class probabilities of the manoeuvre variant.
+    compact = _mean(predictors[maneuvers], hist, nbr_hist, slot, weight, mode="weighted")
+    dense = _mean_dense(predictors[maneuvers], hist, nbrs, occ, mode="weighted")
+    np.testing.assert_allclose(compact, dense, rtol=1e-12, atol=1e-12)
+
+
+def test_occupancy_zero_is_an_absent_neighbour_exactly(predictors):
+    predictor = predictors[True]
+    hist, nbr_hist, slot, weight = _si_batch(4)
+    fwd = _forward
+    # Compact: a weight-0 neighbour (any history) == the same row marked as padding (slot -1).
+    weight0 = weight.copy()
+    weight0[:, 1] = 0.0
+    padded_slot = slot.copy()
+    padded_slot[:, 1] = -1
+    other = nbr_hist.copy()
+    other[:, 1] = 1e3
+    a = fwd(predictor, hist, nbr_hist, slot, weight0)
+    b = fwd(predictor, hist, other, padded_slot, weight)
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        assert np.array_equal(x, y)
+    # Dense: occupancy 0 in a slot == an empty slot, whatever history it holds.
+    nbrs, occ = _to_dense(nbr_hist, slot, weight0)
+    nbrs_empty = nbrs.copy()
+    nbrs_empty[np.arange(B), slot[:, 1]] = 0.0
+    dense = _mean_dense
+    assert np.array_equal(dense(predictor, hist, nbrs, occ), dense(predictor, hist, nbrs_empty, occ))
+
+
+@jax.jit
+def _loss_compact(predictor, probe, hist, nbr_hist, weight, slot):
+    return jnp.sum(probe * predict_mean(predictor, hist, nbr_hist, slot, weight, mode="weighted"))
+
+
+@jax.jit
+def _loss_dense(predictor, probe, occ, hist, nbrs):
+    return jnp.sum(probe * predict_mean_dense(predictor, hist, nbrs, occ, mode="weighted"))
+
+
+_GRADS = {}
+
+
+def _grad(fn, n_args):
+    """jit(grad) w.r.t. the n_args arguments after (predictor, probe), built once per function."""
+    if fn not in _GRADS:
+        _GRADS[fn] = jax.jit(jax.grad(fn, argnums=tuple(range(2, 2 + n_args))))
+    return _GRADS[fn]
+
+
+@pytest.mark.parametrize("maneuvers", VARIANTS, ids=["single", "maneuver"])
+def test_gradients_match_finite_differences(predictors, maneuvers):
+    predictor = predictors[maneuvers]
+    hist, nbr_hist, slot, weight = _si_batch(5)
+    nbrs, occ = _to_dense(nbr_hist, slot, weight)
+    probe = np.random.default_rng(6).normal(size=(B, 25, 2))
+
+    rng = np.random.default_rng(7)
+    eps = 1e-6
+    cases = ((_loss_compact, (hist, nbr_hist, weight), (slot,)), (_loss_dense, (occ,), (hist, nbrs)))
+    for fn, args, fixed in cases:
+        grads = _grad(fn, len(args))(predictor, probe, *args, *fixed)
+        for i, (arg, g) in enumerate(zip(args, grads)):
+            # Only occupied slots: at an empty slot of the dense grid the reference's max-pool
+            # compares identical empty regions (a tie), where the network has no derivative.
+            v = rng.normal(size=arg.shape) * (occ > 0 if fn is _loss_dense else 1.0)
+            plus = [a + eps * v if j == i else a for j, a in enumerate(args)]
+            minus = [a - eps * v if j == i else a for j, a in enumerate(args)]
+            fd = (fn(predictor, probe, *plus, *fixed) - fn(predictor, probe, *minus, *fixed)) / (2 * eps)
+            np.testing.assert_allclose(np.sum(g * v), fd, rtol=1e-6, atol=1e-8)
+
+
+def test_values_and_gradients_finite_at_extremes(predictors):
+    predictor = predictors[True]
+    hist, nbr_hist, slot, weight = _si_batch(8)
+    probe = np.ones((B, 25, 2))
+    grad = _grad(_loss_compact, 3)
+    for scale, w in ((1e4, 0.0), (1e4, 1.0), (0.0, 0.0), (0.0, 1.0)):
+        args = (hist * scale, nbr_hist * scale, np.full_like(weight, w))
+        out = _loss_compact(predictor, probe, *args, slot)
+        grads = grad(predictor, probe, *args, slot)
+        assert np.isfinite(out) and all(np.all(np.isfinite(g)) for g in grads)
+
+
+def test_frame_round_trip_and_axes():
+    xy_m = np.random.default_rng(9).normal(size=(5, 16, 2)) * 30
+    np.testing.assert_allclose(model_to_si(si_to_model(xy_m)), xy_m, rtol=1e-15, atol=1e-12)
+    # 1 m forward and 1 m to the left is 3.28 ft forward and 3.28 ft to the left (lateral < 0).
+    np.testing.assert_allclose(si_to_model(np.array([1.0, 1.0])), [-1 / 0.3048, 1 / 0.3048])
+    np.testing.assert_allclose(model_to_si(np.array([15.0, -30.0])), [-30 * 0.3048, -15 * 0.3048])
+
+
+def test_float32_in_float32_out(predictors):
+    hist, nbr_hist, slot, weight = _si_batch(10, np.float32)
+    out = _mean(predictors[False], hist, nbr_hist, slot, weight)
+    assert out.dtype == jnp.float32 and out.shape == (B, 25, 2)
+
+
+def test_small_public_functions_under_jit_equal_eager():
+    # predict_mean, predict_mean_dense and predict_model_frame run under jit in every test above.
+    hist, nbr_hist, _, _ = _si_batch(11)
+    cases = [
+        (si_to_model, (hist,)),
+        (model_to_si, (hist,)),
+        (output_activation, (nbr_hist[..., :5, :].reshape(B, -1, 5),)),
+    ]
+    for fn, args in cases:
+        np.testing.assert_allclose(jax.jit(fn)(*args), fn(*args), rtol=1e-12, atol=1e-12)

@@ -1,0 +1,87 @@
+"""`python -m diffsense.predict parity|card`: reference-layout outputs of both published
+checkpoints against the numpy forward; bad input is one line and exit code 2, nothing written."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import _numpy_cslstm
+from diffsense import _cli
+from diffsense.predict import read_state_dict
+from diffsense.predict.__main__ import main
+
+
+def _run(argv: list[str]) -> int:
+    with pytest.raises(SystemExit) as info:
+        _cli.run(lambda: main(argv))
+    return info.value.code
+
+
+def _write_inputs(path, seed: int = 0, b: int = 4):
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((b, 3, 13, 64), bool)
+    for row in range(b):
+        slots = rng.choice([s for s in range(39) if s != 19], size=3 + row, replace=False)
+        mask[row].reshape(39, 64)[slots] = True
+    n = int(mask[..., 0].sum())
+    hist = (rng.normal(size=(16, b, 2)) * [2.0, 30.0]).astype(np.float32)
+    nbrs = (rng.normal(size=(16, n, 2)) * [12.0, 60.0]).astype(np.float32)
+    np.savez(path, hist=hist, nbrs=nbrs, mask=mask)
+    return hist, nbrs, mask
+
+
+@pytest.mark.parametrize("name", ["cslstm_no_m.tar", "cslstm_m.tar"])
+def test_parity_cli_matches_numpy_forward(ngsim_checkpoint, tmp_path, capsys, name):
+    ckpt = ngsim_checkpoint(name)
+    hist, nbrs, mask = _write_inputs(tmp_path / "in.npz")
+    out = tmp_path / "out.npz"
+    assert _run(["parity", "--checkpoint", str(ckpt), "--inputs", str(tmp_path / "in.npz"), "--out", str(out)]) == 0
+    want = _numpy_cslstm.forward(read_state_dict(ckpt), hist, nbrs, mask)
+    got = np.load(out)
+    # float32 network vs float64 numpy: agreement to float32 rounding (outputs reach ~100 ft).
+    if name == "cslstm_m.tar":
+        assert got["fut_pred"].shape == (6, 25, 4, 5)
+        np.testing.assert_allclose(got["fut_pred"], np.stack(want[0]), rtol=2e-5, atol=2e-4)
+        np.testing.assert_allclose(got["lat_pred"], want[1], rtol=2e-5, atol=1e-6)
+        np.testing.assert_allclose(got["lon_pred"], want[2], rtol=2e-5, atol=1e-6)
+    else:
+        assert set(got.files) == {"fut_pred"} and got["fut_pred"].shape == (25, 4, 5)
+        np.testing.assert_allclose(got["fut_pred"], want, rtol=2e-5, atol=2e-4)
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_parity_cli_bad_inputs(tmp_path, capsys, ngsim_checkpoint):
+    ckpt = str(ngsim_checkpoint("cslstm_no_m.tar"))
+    hist, nbrs, mask = _write_inputs(tmp_path / "in.npz")
+    np.savez(tmp_path / "short.npz", hist=hist, nbrs=nbrs[:, :-1], mask=mask)
+    np.savez(tmp_path / "nan.npz", hist=np.full_like(hist, np.nan), nbrs=nbrs, mask=mask)
+    np.savez(tmp_path / "nomask.npz", hist=hist, nbrs=nbrs)
+    out = tmp_path / "out.npz"
+    cases = [
+        ("short.npz", "nbrs must be"),
+        ("nan.npz", "finite"),
+        ("nomask.npz", "missing array 'mask'"),
+        ("absent.npz", "inputs not found"),
+    ]
+    for name, needle in cases:
+        args = ["parity", "--checkpoint", ckpt, "--inputs", str(tmp_path / name), "--out", str(out)]
+        assert _run(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("error:") and needle in err and "\n" not in err, err
+        assert not out.exists()
+
+
+def test_cli_exit_code_two_in_a_real_process(tmp_path):
+    proc = subprocess.run(
+        [sys.executable, "-m", "diffsense.predict", "parity", "--checkpoint", str(tmp_path / "no.tar"),
+         "--inputs", str(tmp_path / "in.npz"), "--out", str(tmp_path / "out.npz")],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.strip().count("\n") == 0 and proc.stderr.startswith("error:"), proc.stderr
+    proc = subprocess.run([sys.executable, "-m", "diffsense.predict", "frobnicate"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and proc.stderr.startswith("error:"), proc.stderr
