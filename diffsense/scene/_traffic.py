@@ -1,0 +1,390 @@
+"""Training traffic: IDM + MOBIL vehicles on a straight multi-lane ring road, at 10 Hz.
+
+The road is straight and closed into a ring of length L, so that the density of a simulation
+stays what was drawn: L = vehicles_per_lane / density. Lane 0 is the rightmost; the lateral
+offset d is measured from the right road edge, left positive, so lane k's centre is at
+d = (k + 1/2) * lane_width. Arc length s is kept unwrapped (it only grows); distances on the
+ring are taken modulo L.
+
+Each step (dt = 0.1 s):
+- every vehicle finds, in the lanes right of, at and left of its own, the nearest vehicle ahead
+  (leader) and behind (follower); a vehicle that is changing lanes occupies both lanes;
+- longitudinal: IDM towards the leader of every lane it occupies, the most cautious one applies
+  (diffsense.scene._idm); ballistic update that never reverses;
+- lateral: a vehicle not changing lanes and out of its cool-down asks MOBIL
+  (diffsense.scene._mobil) about both neighbouring lanes and starts a quintic lane change
+  (diffsense.scene._lane_change) of a duration drawn from the config; two vehicles that would
+  start into a common lane close to each other in the same step are resolved by index;
+- drivers redraw their desired speed at a small rate, which makes braking waves, and their
+  preferred lane (a route towards an exit or away from a merge, as on US-101), which adds a
+  bonus to MOBIL's incentive towards it.
+
+`simulate_traffic` runs one simulation; vmap it over keys for independent simulations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int, PRNGKeyArray
+
+from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams, idm_acceleration
+from diffsense.scene._lane_change import quintic_progress
+from diffsense.scene._mobil import MOBILParams, mobil_incentive_mps2, mobil_wants_change
+from diffsense.scene._traffic_config import TrafficConfig
+
+DT_S = 0.1
+# Relative lanes of the neighbour tables: right of, at, left of a vehicle's (origin) lane.
+_RIGHT, _OWN, _LEFT = 0, 1, 2
+# Bisection steps for the initial equilibrium speed: halves [0, v0] to < 1e-5 of v0.
+_EQUILIBRIUM_BISECTIONS = 18
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class TrafficVehicles:
+    """Fixed properties of the V vehicles of one simulation (leading N for a batch).
+
+    Attributes:
+        length_m, width_m: [V] body size [m].
+        kind: [V] CAR, VAN or TRUCK.
+        idm: IDMParams with [V] fields; its desired speed is the initial one.
+        politeness: [V] MOBIL politeness [-].
+        max_desired_speed_mps: [V] the kind's cap on desired speed [m/s].
+        mean_desired_speed_mps: [] the simulation's mean desired speed [m/s].
+        ring_length_m: [] length of the ring road [m].
+    """
+
+    length_m: Float[Array, "*N V"]
+    width_m: Float[Array, "*N V"]
+    kind: Int[Array, "*N V"]
+    idm: IDMParams
+    politeness: Float[Array, "*N V"]
+    max_desired_speed_mps: Float[Array, "*N V"]
+    mean_desired_speed_mps: Float[Array, "*N"]
+    ring_length_m: Float[Array, "*N"]
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class TrafficState:
+    """Dynamic state of one simulation (leading N for a batch).
+
+    Attributes:
+        s_m: [V] unwrapped arc length [m].
+        speed_mps: [V] longitudinal speed [m/s].
+        lane: [V] the lane a vehicle is in, or leaves while changing (0 = rightmost) [-].
+        target_lane: [V] the lane it moves to; equal to `lane` when not changing [-].
+        since_change_s: [V] time since the last lane change started [s].
+        change_duration_s: [V] duration of the current (or last) lane change [s].
+        desired_speed_mps: [V] current IDM v0 [m/s].
+        preferred_lane: [V] the lane the driver's route asks for (an exit, a merge) [-].
+    """
+
+    s_m: Float[Array, "*N V"]
+    speed_mps: Float[Array, "*N V"]
+    lane: Int[Array, "*N V"]
+    target_lane: Int[Array, "*N V"]
+    since_change_s: Float[Array, "*N V"]
+    change_duration_s: Float[Array, "*N V"]
+    desired_speed_mps: Float[Array, "*N V"]
+    preferred_lane: Int[Array, "*N V"]
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class TrafficTrajectories:
+    """Recorded traffic at 10 Hz: T frames of V vehicles (leading N for a batch).
+
+    Attributes:
+        s_m: [T, V] unwrapped arc length [m] (positions on the ring are s mod ring_length_m).
+        d_m: [T, V] lateral offset from the right road edge, left positive [m].
+        speed_mps: [T, V] longitudinal speed [m/s].
+        lane: [T, V] the lane a vehicle is in or leaves while changing [-].
+        target_lane: [T, V] the lane it changes to (= lane when not changing) [-].
+        vehicles: the fixed vehicle properties.
+        dt_s: frame period [s] (static).
+    """
+
+    s_m: Float[Array, "*N T V"]
+    d_m: Float[Array, "*N T V"]
+    speed_mps: Float[Array, "*N T V"]
+    lane: Int[Array, "*N T V"]
+    target_lane: Int[Array, "*N T V"]
+    vehicles: TrafficVehicles
+    dt_s: float = dataclasses.field(default=DT_S, metadata=dict(static=True))
+
+    def centre_lane(self, lane_width_m: float) -> Int[Array, "*N T V"]:
+        """The lane the vehicle centre is in (what a lane detector reports) [-]."""
+        return jnp.floor(self.d_m / lane_width_m).astype(jnp.int32)
+
+
+def num_steps(cfg: TrafficConfig) -> tuple[int, int]:
+    """(warm-up steps, recorded steps) at 10 Hz for one simulation of `cfg`.
+
+    The recording spans 4 s before the first prediction instant (the lateral label looks 4 s
+    back), the window of instants, and 5 s after the last one (the future).
+    """
+    warmup = round(cfg.sampling.warmup_s / DT_S)
+    recorded = round((4.0 + cfg.sampling.window_s + 5.0) / DT_S) + 1
+    return warmup, recorded
+
+
+def _uniform(key: PRNGKeyArray, interval, shape, dtype) -> Array:
+    lo, hi = interval
+    return jax.random.uniform(key, shape, dtype, minval=lo, maxval=hi)
+
+
+def _by_kind(kind: Int[Array, "V"], u: Float[Array, "V"], intervals) -> Float[Array, "V"]:
+    """Draw per vehicle from its kind's interval, given u ~ U(0, 1)."""
+    lo = jnp.asarray([i[0] for i in intervals], u.dtype)[kind]
+    hi = jnp.asarray([i[1] for i in intervals], u.dtype)[kind]
+    return lo + u * (hi - lo)
+
+
+def _equilibrium_speed(gap_m: Float[Array, "V"], p: IDMParams) -> Float[Array, "V"]:
+    """The IDM speed at which `gap_m` is the steady-state gap, by bisection on [0, v0] [m/s]."""
+
+    def excess_gap(v):  # s0 + vT - gap * sqrt(1 - (v/v0)^delta): increasing in v
+        free = jnp.clip(1.0 - (v / p.desired_speed_mps) ** p.accel_exponent, 0.0, 1.0)
+        return p.min_gap_m + v * p.time_headway_s - gap_m * jnp.sqrt(free)
+
+    def bisect(_, bounds):
+        lo, hi = bounds
+        mid = 0.5 * (lo + hi)
+        below = excess_gap(mid) < 0.0
+        return jnp.where(below, mid, lo), jnp.where(below, hi, mid)
+
+    lo, _ = jax.lax.fori_loop(0, _EQUILIBRIUM_BISECTIONS, bisect, (jnp.zeros_like(gap_m), p.desired_speed_mps))
+    return lo
+
+
+def init_traffic(cfg: TrafficConfig, key: PRNGKeyArray, dtype=jnp.float32) -> tuple[TrafficVehicles, TrafficState]:
+    """Draw one simulation: its density and speed level, the vehicles, and an equilibrium start.
+
+    Vehicles i = k * vehicles_per_lane + j start in lane k, spaced with random extra gaps; the
+    ring is lengthened if the drawn density cannot hold the drawn vehicles with their IDM gaps.
+    """
+    road, traffic = cfg.road, cfg.traffic
+    n_lanes, per_lane = road.num_lanes, road.vehicles_per_lane
+    num_v = cfg.num_vehicles
+    keys = jax.random.split(key, 12)
+    density = _uniform(keys[0], traffic.density_veh_per_km_lane, (), dtype)
+    mean_v0 = _uniform(keys[1], traffic.desired_speed_mps, (), dtype)
+    kind = jax.random.choice(keys[2], 3, (num_v,), p=jnp.asarray(traffic.kind_probabilities, dtype)).astype(jnp.int32)
+    u = jax.random.uniform(keys[3], (7, num_v), dtype)
+    kinds = cfg.kinds
+    length = _by_kind(kind, u[0], [k.length_m for k in kinds])
+    width = _by_kind(kind, u[1], [k.width_m for k in kinds])
+    cap = jnp.asarray([k.max_desired_speed_mps for k in kinds], dtype)[kind]
+    spread = traffic.desired_speed_spread
+    v0 = jnp.minimum(mean_v0 * _uniform(keys[4], (1.0 - spread, 1.0 + spread), (num_v,), dtype), cap)
+    idm = IDMParams(
+        desired_speed_mps=v0,
+        time_headway_s=_by_kind(kind, u[2], [k.time_headway_s for k in kinds]),
+        min_gap_m=_by_kind(kind, u[3], [k.min_gap_m for k in kinds]),
+        max_accel_mps2=_by_kind(kind, u[4], [k.max_accel_mps2 for k in kinds]),
+        comfort_decel_mps2=_by_kind(kind, u[5], [k.comfort_decel_mps2 for k in kinds]),
+        accel_exponent=jnp.full((num_v,), traffic.accel_exponent, dtype),
+    )
+    politeness = _uniform(keys[5], cfg.lane_change.politeness, (num_v,), dtype)
+
+    # Place each lane's vehicles around the ring: body + s0 + a random share of the free length.
+    need = (length + idm.min_gap_m).reshape(n_lanes, per_lane)
+    ring = jnp.maximum(per_lane * 1000.0 / density, jnp.max(jnp.sum(need, axis=1)) * 1.05)
+    weights = jax.random.uniform(keys[6], (n_lanes, per_lane), dtype, 0.5, 1.5)
+    extra = (ring - jnp.sum(need, axis=1, keepdims=True)) * weights / jnp.sum(weights, axis=1, keepdims=True)
+    pitch = need + extra  # from a vehicle's rear to the next one's rear
+    lane_offset = jax.random.uniform(keys[7], (n_lanes, 1), dtype, 0.0, 1.0) * ring
+    rear = lane_offset + jnp.cumsum(pitch, axis=1) - pitch
+    s = (rear.reshape(num_v) + 0.5 * length)
+    gap = (pitch - need).reshape(num_v) + idm.min_gap_m
+    speed = _equilibrium_speed(gap, idm)
+
+    lane = (jnp.arange(num_v) // per_lane).astype(jnp.int32)
+    vehicles = TrafficVehicles(
+        length_m=length, width_m=width, kind=kind, idm=idm, politeness=politeness,
+        max_desired_speed_mps=cap, mean_desired_speed_mps=mean_v0, ring_length_m=ring,
+    )
+    state = TrafficState(
+        s_m=s, speed_mps=speed, lane=lane, target_lane=lane,
+        since_change_s=jnp.full((num_v,), 1e3, dtype),  # long ago: free to change at once
+        change_duration_s=jnp.full((num_v,), cfg.lane_change.duration_s[0], dtype),
+        desired_speed_mps=v0,
+        preferred_lane=jax.random.randint(keys[8], (num_v,), 0, n_lanes).astype(jnp.int32),
+    )
+    return vehicles, state
+
+
+def _take(x: Array, index: Int[Array, "..."]) -> Array:
+    """x[index] for a per-vehicle array x [V] (index may have any shape)."""
+    return x[index]
+
+
+def _idm_of(p: IDMParams, index: Int[Array, "..."]) -> IDMParams:
+    return jax.tree_util.tree_map(lambda a: _take(a, index), p)
+
+
+def lateral_offset_m(state: TrafficState, lane_width_m: float) -> Float[Array, "V"]:
+    """Lateral offset of each vehicle centre from the right road edge [m]."""
+    d_from = (state.lane + 0.5) * lane_width_m
+    d_to = (state.target_lane + 0.5) * lane_width_m
+    progress = quintic_progress(state.since_change_s, 0.0, state.change_duration_s)
+    return (d_from + (d_to - d_from) * progress).astype(state.s_m.dtype)
+
+
+def _neighbours(state: TrafficState, vehicles: TrafficVehicles):
+    """Leader and follower of every vehicle in the lanes right of, at and left of its own.
+
+    Returns (leader, leader_dist, has_leader, follower, follower_dist, has_follower), each [V, 3];
+    distances are centre to centre along the ring [m].
+    """
+    s, ring = state.s_m, vehicles.ring_length_m
+    num_v = s.shape[0]
+    ahead = jnp.mod(s[None, :] - s[:, None], ring)  # [i, j]: how far j is ahead of i
+    behind = jnp.mod(s[:, None] - s[None, :], ring)
+    rel = jnp.arange(3) - 1  # right, own, left
+    lane_of_i = state.lane[:, None, None] + rel[None, None, :]  # [i, 1, r]
+    occupies = (state.lane[None, :, None] == lane_of_i) | (state.target_lane[None, :, None] == lane_of_i)
+    occupies &= ~jnp.eye(num_v, dtype=bool)[:, :, None]  # [i, j, r]
+    big = jnp.asarray(jnp.inf, s.dtype)
+    ahead_r = jnp.where(occupies, ahead[:, :, None], big)
+    behind_r = jnp.where(occupies, behind[:, :, None], big)
+    leader = jnp.argmin(ahead_r, axis=1)
+    follower = jnp.argmin(behind_r, axis=1)
+    leader_dist = jnp.min(ahead_r, axis=1)
+    follower_dist = jnp.min(behind_r, axis=1)
+    return leader, leader_dist, jnp.isfinite(leader_dist), follower, follower_dist, jnp.isfinite(follower_dist)
+
+
+def _idm_towards(speed, own_len, p: IDMParams, lead_dist, lead_len, lead_speed, has_lead):
+    """IDM acceleration towards a (maybe absent) leader at centre distance `lead_dist` [m/s2].
+
+    A driver above its desired speed (after picking a lower one) slows down at no more than its
+    comfortable deceleration b: plain IDM would brake at a_max (v/v0)^4, over 10 m/s2 at twice
+    v0 (the reason for Treiber & Kesting's IIDM). Braking for a leader is untouched.
+    """
+    gap = jnp.where(has_lead, lead_dist - 0.5 * (own_len + lead_len), FREE_ROAD_GAP_M)
+    accel = idm_acceleration(speed, gap, jnp.where(has_lead, lead_speed, speed), p)
+    free_road = p.max_accel_mps2 * (1.0 - (speed / p.desired_speed_mps) ** p.accel_exponent)
+    return accel + jnp.maximum(-p.comfort_decel_mps2 - free_road, 0.0)
+
+
+def traffic_step(
+    cfg: TrafficConfig, vehicles: TrafficVehicles, state: TrafficState, key: PRNGKeyArray
+) -> TrafficState:
+    """Advance one simulation by one 0.1 s step."""
+    lc = cfg.lane_change
+    dtype = state.s_m.dtype
+    num_v = state.s_m.shape[0]
+    v, length = state.speed_mps, vehicles.length_m
+    idm = dataclasses.replace(vehicles.idm, desired_speed_mps=state.desired_speed_mps)
+    leader, lead_dist, has_lead, follower, foll_dist, has_foll = _neighbours(state, vehicles)
+
+    # Longitudinal: IDM towards the leader of each relative lane; a vehicle obeys every lane it occupies.
+    idm_r = jax.tree_util.tree_map(lambda a: a[:, None], idm)
+    accel_r = _idm_towards(v[:, None], length[:, None], idm_r, lead_dist, length[leader], v[leader], has_lead)
+    changing = state.target_lane != state.lane
+    to_r = jnp.clip(state.target_lane - state.lane + 1, 0, 2)
+    accel = jnp.minimum(accel_r[:, _OWN], jnp.take_along_axis(accel_r, to_r[:, None], axis=1)[:, 0])
+
+    # Lateral decision (MOBIL) for vehicles in a lane, out of their cool-down.
+    ready = ~changing & (state.since_change_s >= state.change_duration_s + lc.cooldown_s)
+    old_f, has_old_f = follower[:, _OWN], has_foll[:, _OWN]
+    own_leader, has_own_leader = leader[:, _OWN], has_lead[:, _OWN]
+    # The old follower's leader once we are gone: ours (unless that is itself, on a short ring).
+    o_has_new_lead = has_own_leader & has_old_f & (own_leader != old_f)
+    o_accel_after = _idm_towards(
+        v[old_f], length[old_f], _idm_of(idm, old_f), foll_dist[:, _OWN] + lead_dist[:, _OWN],
+        length[own_leader], v[own_leader], o_has_new_lead,
+    )
+    o_gain = jnp.where(has_old_f, o_accel_after - accel[old_f], 0.0)
+    mobil = MOBILParams(
+        politeness=vehicles.politeness, threshold_mps2=lc.threshold_mps2,
+        safe_decel_mps2=lc.safe_decel_mps2, keep_right_bias_mps2=lc.keep_right_bias_mps2,
+    )
+
+    def consider(r: int):
+        new_f, has_new_f = follower[:, r], has_foll[:, r]
+        n_accel_after = _idm_towards(v[new_f], length[new_f], _idm_of(idm, new_f), foll_dist[:, r], length, v, has_new_f)
+        n_accel_after = jnp.where(has_new_f, n_accel_after, 0.0)
+        n_accel = jnp.where(has_new_f, accel[new_f], 0.0)
+        incentive = mobil_incentive_mps2(accel, accel_r[:, r], n_accel, n_accel_after, 0.0, o_gain, mobil)
+        lead_gap = jnp.where(has_lead[:, r], lead_dist[:, r] - 0.5 * (length + length[leader[:, r]]), jnp.inf)
+        foll_gap = jnp.where(has_new_f, foll_dist[:, r] - 0.5 * (length + length[new_f]), jnp.inf)
+        lane_exists = (state.lane + r - 1 >= 0) & (state.lane + r - 1 < cfg.road.num_lanes)
+        # Route: a bonus for moving towards the preferred lane, a malus for moving away.
+        towards = jnp.sign(state.preferred_lane - state.lane) == r - 1
+        incentive += jnp.where(towards, cfg.lane_change.route_bias_mps2, -cfg.lane_change.route_bias_mps2)
+        wants = mobil_wants_change(incentive, n_accel_after, r == _LEFT, mobil)
+        wants &= ready & lane_exists & (lead_gap > lc.min_gap_m) & (foll_gap > lc.min_gap_m)
+        bias = lc.keep_right_bias_mps2 if r == _LEFT else -lc.keep_right_bias_mps2
+        return wants, incentive - bias
+
+    want_right, score_right = consider(_RIGHT)
+    want_left, score_left = consider(_LEFT)
+    go_left = want_left & (~want_right | (score_left > score_right))
+    starts = want_left | want_right
+    new_target = jnp.where(starts, state.lane + jnp.where(go_left, 1, -1), state.target_lane)
+
+    # Two starters whose lanes would overlap and that are close: only the lower index goes.
+    sep = jnp.mod(state.s_m[None, :] - state.s_m[:, None] + 0.5 * vehicles.ring_length_m, vehicles.ring_length_m)
+    close = jnp.abs(sep - 0.5 * vehicles.ring_length_m) < 0.5 * (length[:, None] + length[None, :]) + lc.conflict_distance_m
+    lo_i = jnp.minimum(state.lane, new_target)
+    hi_i = jnp.maximum(state.lane, new_target)
+    share = (lo_i[:, None] <= hi_i[None, :]) & (lo_i[None, :] <= hi_i[:, None])
+    blocked = jnp.any(starts[None, :] & close & share & (jnp.arange(num_v)[None, :] < jnp.arange(num_v)[:, None]), axis=1)
+    starts &= ~blocked
+    new_target = jnp.where(starts, new_target, state.target_lane)
+
+    u = jax.random.uniform(key, (5, num_v), dtype)
+    duration = jnp.where(starts, lc.duration_s[0] + u[0] * (lc.duration_s[1] - lc.duration_s[0]), state.change_duration_s)
+    since = jnp.where(starts, 0.0, state.since_change_s) + DT_S
+    done = (new_target != state.lane) & (since >= duration)
+    lane = jnp.where(done, new_target, state.lane)
+
+    # Ballistic longitudinal update that stops at zero speed instead of reversing.
+    v_new = v + accel * DT_S
+    stops = v_new < 0.0
+    safe_accel = jnp.where(stops, jnp.minimum(accel, -1e-3), accel)
+    ds = jnp.where(stops, -0.5 * v * v / safe_accel, v * DT_S + 0.5 * accel * DT_S * DT_S)
+
+    # Drivers occasionally pick a new desired speed (a new mood, a speed limit sign).
+    lo, hi = cfg.traffic.speed_change_factor
+    redraw = u[1] < cfg.traffic.speed_change_rate_per_s * DT_S
+    new_v0 = jnp.minimum(vehicles.mean_desired_speed_mps * (lo + (hi - lo) * u[2]), vehicles.max_desired_speed_mps)
+    new_preferred = jnp.minimum((u[4] * cfg.road.num_lanes).astype(jnp.int32), cfg.road.num_lanes - 1)
+    return TrafficState(
+        s_m=state.s_m + ds,
+        speed_mps=jnp.maximum(v_new, 0.0),
+        lane=lane,
+        target_lane=new_target,
+        since_change_s=since.astype(dtype),
+        change_duration_s=duration.astype(dtype),
+        desired_speed_mps=jnp.where(redraw, new_v0, state.desired_speed_mps),
+        preferred_lane=jnp.where(u[3] < lc.route_change_rate_per_s * DT_S, new_preferred, state.preferred_lane),
+    )
+
+
+def simulate_traffic(cfg: TrafficConfig, key: PRNGKeyArray, dtype=jnp.float32) -> TrafficTrajectories:
+    """One simulation of `cfg`: warm-up, then the recorded frames at 10 Hz.
+
+    `cfg` is static (hashable); vmap over `key` for independent simulations, e.g.
+    `jax.jit(jax.vmap(simulate_traffic, (None, 0)), static_argnums=0)`.
+    """
+    init_key, run_key = jax.random.split(key)
+    vehicles, state = init_traffic(cfg, init_key, dtype)
+    warmup, recorded = num_steps(cfg)
+    lane_width = cfg.road.lane_width_m
+
+    def step(state, k):
+        frame = (state.s_m, lateral_offset_m(state, lane_width), state.speed_mps, state.lane, state.target_lane)
+        return traffic_step(cfg, vehicles, state, k), frame
+
+    # One scan over warm-up and recording (two scans would compile the step twice); the warm-up
+    # frames are dropped.
+    _, frames = jax.lax.scan(step, state, jax.random.split(run_key, warmup + recorded))
+    s, d, speed, lane, target = (f[warmup:] for f in frames)
+    return TrafficTrajectories(s_m=s, d_m=d, speed_mps=speed, lane=lane, target_lane=target, vehicles=vehicles)
