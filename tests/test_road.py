@@ -99,7 +99,7 @@ def test_gradients_match_finite_differences():
         ('name = "r"\nlane_width_m = 3.66\nnum_lanes = 3\nlanes = 2\n[[segments]]\nlength_m = 10.0\n', "unknown key 'lanes'"),
         ('name = "r"\nlane_width_m = "wide"\nnum_lanes = 3\n[[segments]]\nlength_m = 10.0\n', "lane_width_m: expected a number"),
         ('name = "r"\nlane_width_m = 3.66\nnum_lanes = 3\n[[segments]]\nlength_m = 10.0\nradius_m = 5.0\n', "radius_m"),
-        ('name = "r"\nlane_width_m = 3.66\nnum_lanes = 3\nsegments = []\n', "at least one segment"),
+        ('name = "r"\nlane_width_m = 3.66\nnum_lanes = 3\nsegments = []\n', "needs 1 to 7 segments"),
     ],
 )
 def test_road_config_rejects(tmp_path, text, needle):

@@ -56,7 +56,7 @@ def _show(args: argparse.Namespace) -> int:
     batch = simulate_scenario(cfg, args.variant + 1, jax.random.key(args.seed), road=road)
     scene = jax.tree.map(lambda a: a[args.variant], batch)
     if args.json:
-        json.dump(scene_json(scene, road), sys.stdout)
+        json.dump(scene_json(scene, road, cfg.road), sys.stdout)
         sys.stdout.write("\n")
     if args.out:
         from diffsense._io import save_figure

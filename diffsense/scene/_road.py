@@ -5,8 +5,9 @@ d is the lateral offset to the left of it, so the lane k centre is at d = (k + 1
 road covers 0 <= d <= num_lanes * w. Pieces have constant curvature kappa (0 for straight), so
 the centreline has a closed form: a chord of length sigma * sinc(kappa sigma / 2) in the
 direction theta0 + kappa sigma / 2. `jnp.sinc` has a well-defined derivative at 0, so one formula
-serves straight and curved pieces and stays differentiable. Beyond the two ends the first and last
-pieces continue (configs start and end with a straight piece, so that is a straight extension).
+serves straight and curved pieces and stays differentiable. Before s = 0 the first piece continues;
+beyond the end the road continues straight. Every road is padded to MAX_PIECES pieces (zero-length
+straight ones at the end) and carries its sizes as arrays, so one compiled simulation serves all.
 
 Units: s, d, x, y [m]; angles [rad]; curvature [1/m].
 """
@@ -29,6 +30,7 @@ from diffsense.scene._named_config import load_named
 # Newton steps of the projection onto a piece: the error squares each step (|d| kappa << 1 on a
 # highway), so 4 steps from the tangent-line guess reach float64 round-off.
 _PROJECTION_STEPS = 4
+MAX_PIECES = 8
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,14 +81,16 @@ class RoadConfig:
             raise InputError(f"num_lanes must be in [1, 12], got {self.num_lanes}")
         if not 0 <= self.auxiliary_lanes < self.num_lanes:
             raise InputError(f"auxiliary_lanes must be in [0, num_lanes), got {self.auxiliary_lanes}")
-        if not self.segments:
-            raise InputError("a road needs at least one segment")
+        if not 1 <= len(self.segments) <= MAX_PIECES - 1:
+            raise InputError(f"a road needs 1 to {MAX_PIECES - 1} segments, got {len(self.segments)}")
 
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
 class Road:
-    """The reference line as K constant-curvature pieces, ready for JAX.
+    """The reference line as K = MAX_PIECES constant-curvature pieces, ready for JAX.
+
+    Every field is an array (no static metadata), so roads of any shape share compilations.
 
     Attributes:
         start_s_m: [K] arc length where each piece starts [m] (start_s_m[0] = 0).
@@ -94,11 +98,10 @@ class Road:
         start_x_m: [K] world x of each piece's start [m].
         start_y_m: [K] world y of each piece's start [m].
         start_heading_rad: [K] world yaw of the reference line at each piece's start [rad].
-        length_m: total arc length [m] (static).
-        lane_width_m: [m] (static).
-        num_lanes: lane count (static).
-        auxiliary_lanes: rightmost lanes that are auxiliary (static).
-        name: (static).
+        length_m: [] total arc length [m].
+        lane_width_m: [] [m].
+        num_lanes: [] lane count.
+        auxiliary_lanes: [] how many of the rightmost lanes are auxiliary.
     """
 
     start_s_m: Float[Array, " K"]
@@ -106,11 +109,10 @@ class Road:
     start_x_m: Float[Array, " K"]
     start_y_m: Float[Array, " K"]
     start_heading_rad: Float[Array, " K"]
-    length_m: float = dataclasses.field(metadata=dict(static=True))
-    lane_width_m: float = dataclasses.field(metadata=dict(static=True))
-    num_lanes: int = dataclasses.field(metadata=dict(static=True))
-    auxiliary_lanes: int = dataclasses.field(default=0, metadata=dict(static=True))
-    name: str = dataclasses.field(default="", metadata=dict(static=True))
+    length_m: Float[Array, ""]
+    lane_width_m: Float[Array, ""]
+    num_lanes: Int[Array, ""]
+    auxiliary_lanes: Int[Array, ""]
 
     @property
     def width_m(self) -> float:
@@ -119,8 +121,9 @@ class Road:
 
 def make_road(cfg: RoadConfig) -> Road:
     """Chain the pieces of `cfg` into a `Road` (piece starts integrated in float64 numpy)."""
-    lengths = np.array([seg.length_m for seg in cfg.segments], dtype=np.float64)
-    kappa = np.array([0.0 if seg.radius_m is None else 1.0 / seg.radius_m for seg in cfg.segments])
+    pad = MAX_PIECES - len(cfg.segments)  # zero-length straight pieces: the straight run-out
+    lengths = np.array([seg.length_m for seg in cfg.segments] + [0.0] * pad, dtype=np.float64)
+    kappa = np.array([0.0 if seg.radius_m is None else 1.0 / seg.radius_m for seg in cfg.segments] + [0.0] * pad)
     s0, x0, y0, th0 = [0.0], [0.0], [0.0], [math.radians(cfg.start_heading_deg)]
     for length, k in zip(lengths[:-1], kappa[:-1]):
         mid = th0[-1] + 0.5 * k * length
@@ -132,8 +135,8 @@ def make_road(cfg: RoadConfig) -> Road:
     return Road(
         start_s_m=np.array(s0), curvature_1pm=kappa, start_x_m=np.array(x0),
         start_y_m=np.array(y0), start_heading_rad=np.array(th0),
-        length_m=float(lengths.sum()), lane_width_m=cfg.lane_width_m, num_lanes=cfg.num_lanes,
-        auxiliary_lanes=cfg.auxiliary_lanes, name=cfg.name,
+        length_m=np.float64(lengths.sum()), lane_width_m=np.float64(cfg.lane_width_m),
+        num_lanes=np.int32(cfg.num_lanes), auxiliary_lanes=np.int32(cfg.auxiliary_lanes),
     )
 
 
@@ -154,6 +157,7 @@ def load_road(name_or_path: str | Path) -> Road:
 
 def _pieces(road: Road, s: Array):
     """Per-point piece parameters (start s, curvature, start pose), cast to the dtype of s."""
+    # Ties (zero-length pads) resolve to the last piece starting at or before s.
     idx = jnp.clip(jnp.searchsorted(jnp.asarray(road.start_s_m, s.dtype), s, side="right") - 1,
                    0, road.start_s_m.shape[0] - 1)
     take = lambda a: jnp.asarray(a, s.dtype)[idx]  # noqa: E731
@@ -219,7 +223,7 @@ def cartesian_to_frenet(
     start, kappa = cast(road.start_s_m), cast(road.curvature_1pm)
     x0, y0, th0 = cast(road.start_x_m), cast(road.start_y_m), cast(road.start_heading_rad)
     num = start.shape[0]
-    ends = jnp.concatenate([start[1:], jnp.array([road.length_m], x.dtype)]) - start
+    ends = jnp.concatenate([start[1:], cast(road.length_m)[None]]) - start
     lo = jnp.where(jnp.arange(num) == 0, -jnp.inf, 0.0)
     hi = jnp.where(jnp.arange(num) == num - 1, jnp.inf, ends)
     px, py = x[..., None], y[..., None]  # broadcast against the K pieces
@@ -244,10 +248,11 @@ def cartesian_to_frenet(
 
 def lane_centre_d_m(road: Road, lane: Int[ArrayLike, "*S"]) -> Float[Array, "*S"]:
     """Lateral offset of lane `lane`'s centre (lane 0 = rightmost) [m]."""
-    return (jnp.asarray(lane) + 0.5) * road.lane_width_m
+    return (jnp.asarray(lane) + 0.5) * jnp.asarray(road.lane_width_m)
 
 
 def lane_index(road: Road, d_m: Float[ArrayLike, "*S"]) -> Int[Array, "*S"]:
     """Index of the lane containing lateral offset d (clipped to the road's lanes) [-]."""
-    lane = jnp.floor(jnp.asarray(d_m) / road.lane_width_m).astype(jnp.int32)
+    d = jnp.asarray(d_m)
+    lane = jnp.floor(d / jnp.asarray(road.lane_width_m, d.dtype)).astype(jnp.int32)
     return jnp.clip(lane, 0, road.num_lanes - 1)

@@ -122,7 +122,7 @@ def simulate_scenario(
     models = load_vehicle_models() if models is None else models
     for what, lane in (("ego.lane", cfg.ego.lane), ("target_lane", cfg.target_lane), ("adjacent_lane", cfg.adjacent_lane)):
         if not 0 <= lane < road.num_lanes:
-            raise InputError(f"{cfg.name}: {what} {lane} is not a lane of road {road.name!r} (0..{road.num_lanes - 1})")
+            raise InputError(f"{cfg.name}: {what} {lane} is not a lane of road {cfg.road!r} (0..{road.num_lanes - 1})")
     num_frames = round(cfg.duration_s / SCENE_DT_S) + 1
     nums = scenario_numbers(cfg, models, road, dtype)
     return simulate_numbers(nums, road, models.driver, key, num_variants, num_frames)

@@ -104,6 +104,7 @@ def scenario_numbers(cfg: ScenarioConfig, models: VehicleModels, road: Road, dty
     sizes = [models.size(name) for name in KIND_NAMES]
     bg = cfg.background
     i = np.arange(bg.count)
+    lanes_here = int(road.num_lanes)
     lanes = [cfg.ego.lane, cfg.target_lane, cfg.ego.lane, cfg.target_lane, cfg.adjacent_lane]
     allowed = [(cfg.ego.kind,)] + [sp.random_kinds for sp in specs]
     f = lambda a: jnp.asarray(a, dtype)  # noqa: E731
@@ -118,7 +119,7 @@ def scenario_numbers(cfg: ScenarioConfig, models: VehicleModels, road: Road, dty
         d_m=f(lane_centre_d_m(road, np.array(lanes))), target_ahead_of_lead=jnp.asarray(cfg.target_ahead_of == "lead"),
         length_of=f([m.length_m for m in sizes]), width_of=f([m.width_m for m in sizes]),
         background_gap_m=f(bg.gap_m), background_spacing_m=f(bg.spacing_m),
-        background_d_m=f(lane_centre_d_m(road, i % road.num_lanes)), background_row=f(i // road.num_lanes),
+        background_d_m=f(lane_centre_d_m(road, i % lanes_here)), background_row=f(i // lanes_here),
         background_kind=jnp.asarray(KIND_NAMES.index(bg.kind), jnp.int32),
     )
 

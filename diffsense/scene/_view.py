@@ -15,19 +15,21 @@ ROLE_COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", 
 _SNAPSHOT_S = 2.0  # body outlines drawn every 2 s
 
 
-def road_json(road: Road) -> dict[str, Any]:
-    """The road's geometry as plain numbers."""
+def road_json(road: Road, name: str) -> dict[str, Any]:
+    """The road's geometry as plain numbers (its pieces, zero-length padding left out)."""
+    pieces = [k for k in range(len(road.start_s_m)) if k == 0 or road.start_s_m[k] < road.length_m]
     return {
-        "name": road.name, "length_m": road.length_m, "lane_width_m": road.lane_width_m,
-        "num_lanes": road.num_lanes, "auxiliary_lanes": road.auxiliary_lanes,
+        "name": name, "length_m": float(road.length_m), "lane_width_m": float(road.lane_width_m),
+        "num_lanes": int(road.num_lanes), "auxiliary_lanes": int(road.auxiliary_lanes),
         "segments": [
             {"start_s_m": float(s), "curvature_1pm": float(k), "x_m": float(x), "y_m": float(y), "heading_rad": float(h)}
-            for s, k, x, y, h in zip(road.start_s_m, road.curvature_1pm, road.start_x_m, road.start_y_m, road.start_heading_rad)
+            for s, k, x, y, h in zip(*(np.asarray(a)[pieces] for a in (
+                road.start_s_m, road.curvature_1pm, road.start_x_m, road.start_y_m, road.start_heading_rad)))
         ],
     }
 
 
-def scene_json(scene: Scene, road: Road) -> dict[str, Any]:
+def scene_json(scene: Scene, road: Road, road_name: str) -> dict[str, Any]:
     """One scene [T, V] as JSON-ready data: road, and per present vehicle its size and track."""
     mm = lambda a: np.round(np.asarray(a, np.float64), 3).tolist()  # noqa: E731
     vehicles = []
@@ -40,7 +42,7 @@ def scene_json(scene: Scene, road: Road) -> dict[str, Any]:
             "s_m": mm(scene.s_m[:, v]), "d_m": mm(scene.d_m[:, v]),
             "x_m": mm(scene.x_m[:, v]), "y_m": mm(scene.y_m[:, v]),
         })
-    return {"dt_s": scene.dt_s, "num_frames": scene.num_frames, "road": road_json(road), "vehicles": vehicles}
+    return {"dt_s": scene.dt_s, "num_frames": scene.num_frames, "road": road_json(road, road_name), "vehicles": vehicles}
 
 
 def _outline(x, y, heading, length, width):
@@ -51,9 +53,10 @@ def _outline(x, y, heading, length, width):
 
 def _draw_road(ax, road: Road, s_lo: float, s_hi: float, world: bool) -> None:
     s = np.linspace(s_lo, s_hi, 400)
-    for k in range(road.num_lanes + 1):
-        d = np.full_like(s, k * road.lane_width_m)
-        edge = k in (0, road.num_lanes)
+    lanes, width = int(road.num_lanes), float(road.lane_width_m)
+    for k in range(lanes + 1):
+        d = np.full_like(s, k * width)
+        edge = k in (0, lanes)
         style = dict(color="k", lw=1.2 if edge else 0.6, ls="-" if edge else (0, (6, 6)))
         if world:
             x, y, _ = (np.asarray(a) for a in frenet_to_cartesian(road, s, d))
@@ -68,7 +71,7 @@ def scene_figure(scene: Scene, road: Road, title: str = "") -> Figure:
     top, bottom = fig.subplots(2, 1)
     present = np.asarray(scene.present)
     s_all = np.asarray(scene.s_m)[:, present]
-    s_lo, s_hi = min(0.0, s_all.min() - 10.0), max(road.length_m, s_all.max() + 10.0)
+    s_lo, s_hi = min(0.0, s_all.min() - 10.0), max(float(road.length_m), s_all.max() + 10.0)
     _draw_road(top, road, s_lo, s_hi, world=True)
     _draw_road(bottom, road, s_lo, s_hi, world=False)
     step = max(1, round(_SNAPSHOT_S / scene.dt_s))
