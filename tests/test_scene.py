@@ -185,6 +185,7 @@ def _write(tmp_path, text):
         (('direction = "right"', 'direction = "left"'), "must start in lane"),
         (('kind = "van"', 'kind = "bus"'), "'bus' is not one of"),
         (('start_s = { nominal = 3.0,', 'start_s = { nominal = 9.0,'), "low <= nominal <= high"),
+        (('speed_kmh = { nominal = 55.0, low = 45.0,', 'speed_kmh = { nominal = 55.0, low = 2.0,'), "moving forward"),
     ],
 )
 def test_config_rejects_with_one_line(tmp_path, edit, needle):
@@ -204,3 +205,26 @@ def test_unknown_scenario_and_bad_lanes():
         simulate_scenario(bad, 2, jax.random.key(0))
     with pytest.raises(InputError, match="num_variants"):
         simulate_scenario(cfg, 0, jax.random.key(0))
+
+
+def test_standstill_and_touching_vehicles_give_finite_gradients():
+    """The extremes: a vehicle at rest, a pair bumper to bumper, a lane change under way."""
+    driver = load_vehicle_models().driver
+    road = load_road("us101")
+    f = lambda *v: jnp.array(v, jnp.float64)  # noqa: E731
+    plan = VehiclePlan(
+        s_m=f(100.0, 104.6, 200.0), speed_mps=f(0.0, 15.0, 20.0), d_from_m=f(5.49, 5.49, 9.15),
+        d_to_m=f(5.49, 5.49, 5.49), lc_start_s=f(NO_LANE_CHANGE_S, NO_LANE_CHANGE_S, 0.5),
+        lc_duration_s=f(1.0, 1.0, 3.0), length_m=f(4.6, 4.6, 4.6), width_m=f(1.8, 1.8, 1.8),
+        kind=jnp.zeros(3, jnp.int32), role=jnp.full(3, 5, jnp.int32),
+    )
+
+    def total(floats):
+        sc = simulate_plan(dataclasses.replace(plan, **floats), road, driver, 61)
+        return sum(jnp.sum(a) for a in (sc.x_m, sc.y_m, sc.heading_rad, sc.speed_mps))
+
+    names = ("s_m", "speed_mps", "d_from_m", "d_to_m", "lc_start_s", "lc_duration_s")
+    value, grads = jax.jit(jax.value_and_grad(total))({k: getattr(plan, k) for k in names})
+    assert np.isfinite(value)
+    for name in names:
+        assert np.all(np.isfinite(grads[name])), name

@@ -143,6 +143,12 @@ class ScenarioConfig:
                              f"must start in lane {self.ego.lane - step}, got target_lane {self.target_lane}")
         if self.adjacent_lane in (self.ego.lane, self.target_lane):
             raise InputError(f"adjacent_lane must differ from the ego's and the target's, got {self.adjacent_lane}")
+        slowest_kmh = self.ego.speed_kmh.low + min(
+            0.0, *(sp.relative_speed_kmh.low for sp in (self.target, self.lead, self.target_lead, self.adjacent)),
+            self.background.relative_speed_kmh.low)
+        if slowest_kmh <= 0.0:
+            raise InputError(f"every vehicle must start moving forward: ego.speed_kmh.low plus the lowest "
+                             f"relative_speed_kmh is {slowest_kmh} km/h")
         if not 1.0 <= self.duration_s <= 120.0:
             raise InputError(f"duration_s must be in [1, 120] s, got {self.duration_s}")
 

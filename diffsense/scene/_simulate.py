@@ -24,6 +24,7 @@ from diffsense.scene._scenario_config import DriverModel, ScenarioConfig, Vehicl
 from diffsense.scene._variants import ScenarioNumbers, VehiclePlan, draw_plan, scenario_numbers
 
 SCENE_DT_S = 0.1  # 10 Hz (DESIGN.md)
+MIN_DESIRED_SPEED_MPS = 1.0  # a floor only: every shipped scenario starts at highway speed
 
 
 def leaders(
@@ -51,7 +52,8 @@ def _idm(plan: VehiclePlan, driver: DriverModel) -> IDMParams:
     """Per-vehicle IDM whose desired speed makes the start gap the equilibrium gap.
 
     From a = 0 at dv = 0: (v/v0)^delta = 1 - ((s0 + v T) / gap)^2. A free vehicle (or one closer
-    than s0 + v T) keeps its start speed as desired speed; the ratio is capped.
+    than s0 + v T) keeps its start speed as desired speed; the ratio is capped, and the desired
+    speed is at least MIN_DESIRED_SPEED_MPS, so that a vehicle starting at rest is well defined.
     """
     gap, _ = leaders(plan.s_m, plan.d_from_m, plan.speed_mps, plan.length_m, plan.width_m,
                      driver.lateral_margin_m)
@@ -61,6 +63,7 @@ def _idm(plan: VehiclePlan, driver: DriverModel) -> IDMParams:
     ok = free > 0.0
     v0 = v / jnp.where(ok, free, 1.0) ** (1.0 / driver.accel_exponent)
     v0 = jnp.clip(jnp.where(ok, v0, v), v, driver.max_desired_speed_ratio * v)
+    v0 = jnp.maximum(v0, MIN_DESIRED_SPEED_MPS)  # v / v0 with v0 = 0 would be 0 / 0
     return IDMParams(v0, driver.time_headway_s, driver.min_gap_m, driver.max_accel_mps2,
                      driver.comfort_decel_mps2, driver.accel_exponent)
 
