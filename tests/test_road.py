@@ -11,6 +11,7 @@ from diffsense.errors import InputError
 from diffsense.scene import (
     cartesian_to_frenet,
     centreline_xy,
+    curvature_1pm,
     frenet_to_cartesian,
     lane_centre_d_m,
     lane_index,
@@ -56,6 +57,11 @@ def test_road_angle_is_the_centreline_derivative(road):
     xp, yp = centreline_xy(road, s + h)
     xm, ym = centreline_xy(road, s - h)
     assert np.allclose(jnp.arctan2(yp - ym, xp - xm), angle, atol=1e-6)
+    # ... and the curvature is the road angle's derivative (away from the pieces' joints).
+    kappa = jax.jit(curvature_1pm)(road, s)
+    fd = (road_angle_rad(road, s + h) - road_angle_rad(road, s - h)) / (2 * h)
+    joint = np.min(np.abs(np.asarray(s)[:, None] - np.asarray(road.start_s_m)[None, :]), axis=1) < 2 * h
+    assert np.allclose(kappa[~joint], fd[~joint], atol=1e-9)
 
 
 def test_us101_bends_and_straight_does_not():
@@ -69,7 +75,7 @@ def test_us101_bends_and_straight_does_not():
 
 def test_lanes(road):
     lanes = jnp.arange(road.num_lanes)
-    d = lane_centre_d_m(road, lanes)
+    d = jax.jit(lane_centre_d_m)(road, lanes)
     assert np.allclose(d, (np.arange(road.num_lanes) + 0.5) * road.lane_width_m)
     assert np.array_equal(jax.jit(lane_index)(road, d), lanes)
     assert int(lane_index(road, -5.0)) == 0 and int(lane_index(road, 1e3)) == road.num_lanes - 1

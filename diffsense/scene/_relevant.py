@@ -27,6 +27,10 @@ GRID_HALF_LENGTH_M = 6.5 * GRID_CELL_M  # 13 cells centred on the target: +-97.5
 HISTORY_S = 3.0  # the CS-LSTM's history (16 points at 5 Hz)
 # Radar 4.2 m and camera 2.5 m ahead of the ego reference point (DESIGN.md, sensor mounting).
 SENSOR_REACH_M = 4.2
+# The road-frame box must contain the straight sight line, which bows in (s, d) on a bend by the
+# sagitta of a 100 m chord (the sensors' range) on the tightest shipped bend, R = 1200 m:
+# 100^2 / (8 * 1200) = 1.04 m.
+MARGIN_M = 1.1
 # Pads sit this far behind the ego, on its lane: absent, but finite and far from everything.
 _PAD_BEHIND_M = 1000.0
 
@@ -73,13 +77,15 @@ def _relevant_one(scene: Scene, window: Bool[Array, " T"], margin_m: float, sens
 
 
 def relevant_mask(
-    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = 1.0,
+    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = MARGIN_M,
     sensor_reach_m: float = SENSOR_REACH_M,
 ) -> Bool[Array, "*N V"]:
     """Which vehicles are relevant (jit-able): [V] for a scene [T, V], [N, V] for a batch.
 
     `frames`: prediction instants (frame indices); their 3 s history windows are searched. None:
-    every frame (any instant may be asked for).
+    every frame (any instant may be asked for). `margin_m` widens the grid's length and the
+    occlusion boxes (see MARGIN_M); `sensor_reach_m` is how far ahead of the ego's centre the
+    sensors sit.
     """
     window = _window_frames(scene.num_frames, frames, scene.dt_s)
     return _mask(scene, window, margin_m, sensor_reach_m)
@@ -94,7 +100,7 @@ def _mask(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach
 
 
 def relevant_vehicles(
-    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = 1.0,
+    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = MARGIN_M,
     sensor_reach_m: float = SENSOR_REACH_M,
 ) -> Scene:
     """The scene restricted to its relevant vehicles, in their original order (ego 0, target 1).
