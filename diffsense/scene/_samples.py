@@ -11,9 +11,9 @@ prediction instant k (a 5 Hz frame):
 - the social grid: 13 cells of 15 ft = 4.572 m along the road x 3 lanes. A vehicle j is a
   neighbour when the lane its centre is in at k is i's, or one left or right of it, and its centre
   is less than 90 ft = 27.432 m ahead or behind i's: grid id = lane * 13 + cell with lane 0 = left,
-  1 = own, 2 = right and cell = round(dlon / 4.572 m) + 6 (0 rearmost). If two vehicles fall into
-  one cell (possible only for short cars closer than 0.6 m), the one nearer the cell centre is
-  kept. A neighbour's history covers the same 16 instants, in the same frame as i's (relative to
+  1 = own, 2 = right and cell = round(dlon / 4.572 m) + 6 (0 rearmost). Two vehicles fall into
+  one cell only when both are shorter than 15 ft and nearly touching; then the one nearer the
+  cell centre is kept (the reference keeps whichever it saw last). A neighbour's history covers the same 16 instants, in the same frame as i's (relative to
   i at k).
 - lateral label (reference rule): with the centre lane at k - 4 s, k and k + 4 s, right (2) if
   the lane at k+4 s is right of the lane at k or the lane at k is right of the one at k-4 s; else

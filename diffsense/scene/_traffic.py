@@ -213,7 +213,7 @@ def init_traffic(cfg: TrafficConfig, key: PRNGKeyArray, dtype=jnp.float32) -> tu
         since_change_s=jnp.full((num_v,), 1e3, dtype),  # long ago: free to change at once
         change_duration_s=jnp.full((num_v,), cfg.lane_change.duration_s[0], dtype),
         desired_speed_mps=v0,
-        preferred_lane=jax.random.randint(keys[8], (num_v,), 0, n_lanes).astype(jnp.int32),
+        preferred_lane=jax.random.randint(keys[8], (num_v,), 0, n_lanes, dtype=jnp.int32),
     )
     return vehicles, state
 

@@ -174,7 +174,7 @@ class SamplingConfig:
     warmup_s: float = 20.0
     window_s: float = 40.0
     instant_every_s: float = 1.0
-    simulations_per_shard: int = 64
+    simulations_per_shard: int = 32
     num_samples: int = 1_000_000
     seed: int = 0
 
