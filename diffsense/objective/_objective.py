@@ -82,7 +82,10 @@ def _mean_sq_error(pred: Float[Array, "N I 25 2"], ref: Float[Array, "N I 25 2"]
 class Objective:
     """E(r) for one sensor parameter over a batch of scene variants.
 
-    Build with `make_objective`. Methods are jitted once per shape; r and tau are scalars.
+    Build with `make_objective`. Exactly three programs are compiled, once per shape: the soft
+    value-and-gradient, the hard evaluation (E and per-horizon RMSE together) and the detections.
+    Every evaluation is memoised by (r, tau), so asking again for a point the solver has already
+    visited (for a figure, a table) costs nothing.
     """
 
     def __init__(self, data: ObjectiveData, frames: np.ndarray, detect: DetectFn, predict: PredictFn,
@@ -95,20 +98,26 @@ class Objective:
         self._detect = detect
         self._predict = predict
         # The fixed data is an argument, not a closure: XLA must not fold it in as a constant.
-        self._e2_and_grad = jax.jit(jax.value_and_grad(self._e2_soft))
-        self._e2_soft_jit = jax.jit(self._e2_soft)
-        self._e2_hard_jit = jax.jit(self._e2_hard)
-        self._horizon_jit = jax.jit(self._horizon_rmse, static_argnums=3)
+        self._vg_jit = jax.jit(jax.value_and_grad(self.traced_e2))
+        self._hard_jit = jax.jit(self._hard_eval)
         self._detections_jit = jax.jit(self._detections, static_argnums=3)
+        self._soft_cache: dict[tuple[float, float], tuple[float, float]] = {}
+        self._hard_cache: dict[float, tuple[float, np.ndarray, np.ndarray]] = {}
+        self.counts = {"soft": 0, "hard": 0}
 
     # -- pure functions of (r, fixed data) ------------------------------------------------------
     def _predict_nI(self, data: ObjectiveData, inputs: PredictorInputs) -> Float[Array, "N I 25 2"]:
         return self._predict(data.model, inputs).reshape(data.gt_pred.shape)
 
     def _detect_all(self, r, tau, data: ObjectiveData, mode: Mode) -> Detections:
+        # r and tau may come in at a wider float type than the data (a float64 outer solver
+        # over a float32 objective): compute at the data's.
+        r, tau = jnp.asarray(r).astype(self.dtype), jnp.asarray(tau).astype(self.dtype)
         return jax.vmap(lambda s, k: self._detect(s, r, tau, mode, k))(data.scenes, data.noise_key)
 
-    def _e2_soft(self, r, tau, data: ObjectiveData):
+    def traced_e2(self, r, tau, data: ObjectiveData | None = None):
+        """Soft E^2(r, tau) [m^2] as a pure, traceable function (for jax transformations)."""
+        data = self.data if data is None else data
         det = self._detect_all(r, tau, data, "soft")
         if self.estimator.kind != "mc":
             pred = self._predict_nI(data, _inputs(data.scenes, det, self.frames, self.fill))
@@ -122,17 +131,9 @@ class Objective:
 
         return jnp.mean(jax.lax.map(one_sample, jnp.swapaxes(data.mc_uniform, 0, 1)))
 
-    def _e2_hard(self, r, data: ObjectiveData):
-        det = self._detect_all(r, jnp.ones_like(r), data, "hard")
-        pred = self._predict_nI(data, _inputs(data.scenes, det, self.frames, self.fill))
-        return _mean_sq_error(pred, data.gt_pred, data.weight)
-
-    def _detections(self, r, tau, data: ObjectiveData, mode: Mode) -> Detections:
-        return self._detect_all(r, tau, data, mode)
-
-    def _horizon_rmse(self, r, tau, data: ObjectiveData, mode: Mode):
-        """Per-scenario RMSE against the true future at each horizon step, [S, 25] twice."""
-        det = self._detect_all(r, tau, data, mode)
+    def _hard_eval(self, r, data: ObjectiveData):
+        """Hard E^2 and per-scenario RMSE against the true future ([S, 25], GT and sensor)."""
+        det = self._detect_all(r, 1.0, data, "hard")
         pred = self._predict_nI(data, _inputs(data.scenes, det, self.frames, self.fill))
         onehot = jax.nn.one_hot(data.scenario, self.num_scenarios) * data.weight[:, None]
         count = jnp.maximum(jnp.sum(onehot, axis=0), 1.0)[:, None]  # a scenario may be absent
@@ -141,29 +142,74 @@ class Objective:
             sq = jnp.mean(jnp.sum((p - data.true_fut) ** 2, axis=-1), axis=1)  # [N, 25]
             return jnp.sqrt(onehot.T @ sq / count)
 
-        return rmse(data.gt_pred), rmse(pred)
+        return _mean_sq_error(pred, data.gt_pred, data.weight), rmse(data.gt_pred), rmse(pred)
 
-    # -- the public, jitted face ---------------------------------------------------------------
-    def e2_and_grad(self, r: float, tau: float = 1.0) -> tuple[Array, Array]:
-        """Soft E^2 [m^2] and dE^2/dr at r, temperatures scaled by tau."""
-        return self._e2_and_grad(jnp.asarray(r, self.dtype), jnp.asarray(tau, self.dtype), self.data)
+    def _detections(self, r, tau, data: ObjectiveData, mode: Mode) -> Detections:
+        return self._detect_all(r, tau, data, mode)
 
-    def e2_soft(self, r: float, tau: float = 1.0) -> Array:
-        """Soft E^2 [m^2] at r (the estimator's value, no gradient computed)."""
-        return self._e2_soft_jit(jnp.asarray(r, self.dtype), jnp.asarray(tau, self.dtype), self.data)
+    # -- the public, compiled and memoised face -------------------------------------------------
+    def value_and_grad(self, r: float, tau: float = 1.0) -> tuple[float, float]:
+        """Soft E^2 [m^2] and dE^2/dr at r, gate temperatures scaled by tau."""
+        key = (float(r), float(tau))
+        if key not in self._soft_cache:
+            self.counts["soft"] += 1
+            v, g = self._vg_jit(jnp.asarray(key[0], self.dtype), jnp.asarray(key[1], self.dtype), self.data)
+            self._soft_cache[key] = (float(v), float(g))
+        return self._soft_cache[key]
+
+    def e2_soft(self, r: float, tau: float = 1.0) -> float:
+        """Soft E^2 [m^2] at r (the estimator's value)."""
+        return self.value_and_grad(r, tau)[0]
+
+    def _hard(self, r: float) -> tuple[float, np.ndarray, np.ndarray]:
+        key = float(r)
+        if key not in self._hard_cache:
+            self.counts["hard"] += 1
+            e2, gt, sensor = self._hard_jit(jnp.asarray(key, self.dtype), self.data)
+            self._hard_cache[key] = (float(e2), np.asarray(gt), np.asarray(sensor))
+        return self._hard_cache[key]
 
     def e_hard(self, r: float) -> float:
         """E [m] with hard (0/1) detections: the reference quality of a parameter value."""
-        return float(jnp.sqrt(self._e2_hard_jit(jnp.asarray(r, self.dtype), self.data)))
+        return float(np.sqrt(max(self._hard(r)[0], 0.0)))
 
-    def horizon_rmse(self, r: float, mode: Mode = "hard", tau: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-        """([S, 25] RMSE of ground-truth-input predictions, [S, 25] of sensor-input ones) [m]."""
-        gt, sensor = self._horizon_jit(jnp.asarray(r, self.dtype), jnp.asarray(tau, self.dtype), self.data, mode)
-        return np.asarray(gt), np.asarray(sensor)
+    def horizon_rmse(self, r: float) -> tuple[np.ndarray, np.ndarray]:
+        """With hard detections at r: ([S, 25] RMSE of the ground-truth-input predictions against
+        the true future, [S, 25] of the sensor-input ones) [m], per scenario."""
+        _, gt, sensor = self._hard(r)
+        return gt, sensor
 
     def detections(self, r: float, mode: Mode = "hard", tau: float = 1.0) -> Detections:
         """The sensor's detections of every variant at r."""
         return self._detections_jit(jnp.asarray(r, self.dtype), jnp.asarray(tau, self.dtype), self.data, mode)
+
+    def solver_fns(self, dtype=jnp.float64) -> tuple[Callable[[Array, Array], Array], Callable[[Array], float]]:
+        """(e2_soft, e_hard) in the form `diffsense.solve.solve` takes.
+
+        `e2_soft(r, tau)` is traceable and differentiable in r, but it calls this objective's
+        compiled value-and-gradient program through a host callback instead of being traced
+        again: a solver that compiles its own loop around it does not compile the CS-LSTM a
+        second time. (Its tau-derivative is not provided.)
+        """
+        spec = jax.ShapeDtypeStruct((), dtype)
+
+        def host_vg(r, tau):
+            v, g = self.value_and_grad(float(r), float(tau))
+            return np.asarray(v, dtype), np.asarray(g, dtype)
+
+        def call(r, tau):
+            return jax.pure_callback(host_vg, (spec, spec), r, tau)
+
+        @jax.custom_jvp
+        def e2_soft(r, tau):
+            return call(r, tau)[0]
+
+        @e2_soft.defjvp
+        def _jvp(primals, tangents):
+            v, g = call(*primals)
+            return v, g * tangents[0]
+
+        return e2_soft, lambda r: self.e_hard(float(r))
 
     @property
     def dtype(self):
