@@ -280,8 +280,8 @@ def main(argv: list[str] | None = None) -> int:
     from diffsense.predict import load_predictor
 
     progress = _Progress(args.quiet)
-    progress("loading the predictor" + (f" {cfg.problem.model}" if cfg.problem.model else " (shipped weights)"))
-    predictor = load_predictor(cfg.problem.model or None)
+    predictor = load_predictor(cfg.problem.model or None)  # a bad checkpoint fails before any output
+    progress("loaded the predictor" + (f" {cfg.problem.model}" if cfg.problem.model else " (shipped weights)"))
     results = {}
     for sensor in sensors:
         folder = out / sensor if len(sensors) > 1 else out
