@@ -13,9 +13,13 @@ from test_sensor_scenes import jit_detect, jit_p_detect, make_scene, traffic_sce
 from diffsense import config as cfg
 from diffsense import sensor
 from diffsense.scene import CAR, TRUCK, VAN
+from diffsense.sensor._geometry import Tracks
 from diffsense.sensor._inspect import boresight_report
+from diffsense.sensor._radar import _radar_terms
 
 RADAR = sensor.load_config("radar")
+jit_terms = jax.jit(lambda tracks, params, config, mode: _radar_terms(tracks, params, config, mode, 1.0),
+                    static_argnames=("config", "mode"))
 CAMERA = sensor.load_config("camera")
 KEY = jax.random.key(7, impl="rbg")  # threefry compiles ~3 s slower on CPU
 
@@ -133,8 +137,8 @@ def test_camera_occlusion_hides_and_radar_occlusion_attenuates():
     params = sensor.make_params(CAMERA, hfov_deg=60.0)
     cam = np.asarray(jit_p_detect(scene, params, CAMERA, mode="hard"))[0]
     np.testing.assert_array_equal(cam, [1, 1, 0, 1, 0])
-    gates = sensor._radar._radar_terms(scene, RADAR.params, RADAR, "hard", 1.0)[0]
-    snr_margin = np.asarray(gates[2][0])[0]  # SNR - threshold per vehicle
+    gates = jit_terms(Tracks.of(scene), RADAR.params, RADAR, "hard")[0]
+    snr_margin = np.asarray(gates[2][0])[:, 0]  # SNR - threshold per vehicle
     open_snr = snr(40.0 - RADAR.mount_x_m)  # the hidden car's SNR without the truck
     assert snr_margin[2] + RADAR.snr_threshold_db == pytest.approx(open_snr - RADAR.occlusion_loss_db)
     radar = np.asarray(jit_p_detect(scene, RADAR.params, RADAR, mode="hard"))[0]
@@ -171,7 +175,7 @@ def test_common_random_numbers_only_the_scale_depends_on_r():
 
 def test_radar_noise_grows_at_low_snr():
     scene = make_scene([[0.0, 20.0, 110.0]], [[0.0, 0.0, 0.0]])
-    terms = sensor._radar._radar_terms(scene, RADAR.params, RADAR, "soft", 1.0)
-    range_sigma = np.asarray(terms[3])[0]
+    terms = jit_terms(Tracks.of(scene), RADAR.params, RADAR, "soft")
+    range_sigma = np.asarray(terms[3])[:, 0]
     assert range_sigma[1] == pytest.approx(0.4, abs=0.01)  # accuracy floor at high SNR
     assert range_sigma[2] > range_sigma[1]

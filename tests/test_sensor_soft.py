@@ -14,7 +14,7 @@ from test_sensor_scenes import make_scene
 from diffsense import sensor
 from diffsense.scene import CAR, TRUCK
 from diffsense.sensor import _camera, _radar
-from diffsense.sensor._geometry import angular_half_width, polar, wrap_angle
+from diffsense.sensor._geometry import Tracks, angular_half_width, polar, wrap_angle
 
 EDGE = 8.0  # "a few tau": a gate at 8 tau is within sigmoid(-8) = 3.4e-4 of its indicator
 TEMPERATURES = (1.0, 0.1, 0.01, 0.001)
@@ -41,8 +41,10 @@ def occlusion_edge_distance(scene, config):
     Edges: equal ranges of two overlapping vehicles, and the two kinks of the overlap clip.
     """
     tau = config.temperature
-    r, az = polar(scene, config.mount_x_m)
-    half = angular_half_width(scene, r, az, config.mount_x_m)
+    tracks = Tracks.of(scene)
+    r, az = polar(tracks, config.mount_x_m)
+    half = angular_half_width(tracks, r, az, config.mount_x_m).T
+    r, az = r.T, az.T  # [T, V]
     hi, hj = half[:, :, None], half[:, None, :]
     reach = hi + hj - jnp.abs(wrap_angle(az[:, None, :] - az[:, :, None]))
     cap = 2 * jnp.minimum(hi, hj)
@@ -62,8 +64,8 @@ def soft_hard_and_edge(scene, params, temperature, *, name):
     config = sensor.load_config(name)
     soft = sensor.p_detect(scene, params, config, mode="soft", temperature=temperature)
     hard = sensor.p_detect(scene, params, config, mode="hard")
-    gates = terms(scene, params, config, "hard", 1.0)[0]
-    edge = jnp.min(jnp.stack([jnp.abs(m) / (t * temperature) for m, t in gates]), axis=0)
+    gates = terms(Tracks.of(scene), params, config, "hard", 1.0)[0]
+    edge = jnp.min(jnp.stack([jnp.abs(m).T / (t * temperature) for m, t in gates]), axis=0)
     edge = jnp.minimum(edge, occlusion_edge_distance(scene, config) / temperature)
     return soft[:, 1:], hard[:, 1:], edge[:, 1:]
 

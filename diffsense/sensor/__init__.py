@@ -15,6 +15,7 @@ from diffsense.sensor._camera import (
 from diffsense.sensor._datatypes import Detections
 from diffsense.sensor._detect import detect, detect_batch, p_detect
 from diffsense.sensor._gates import MODES
+from diffsense.sensor._measure import measurement_noise
 from diffsense.sensor._params import (
     SENSORS,
     CameraConfig,
@@ -42,6 +43,6 @@ __all__ = [
     "MODES", "SENSORS", "CameraConfig", "CameraParams", "CameraTemperatures", "Detections",
     "ParamSpec", "RadarConfig", "RadarParams", "RadarTemperatures", "camera_depth_sigma_m",
     "camera_detect", "camera_p_detect", "camera_px_per_rad", "check_params", "detect",
-    "detect_batch", "load_config", "make_params", "p_detect", "param_specs", "radar_detect",
+    "detect_batch", "load_config", "make_params", "measurement_noise", "p_detect", "param_specs", "radar_detect",
     "radar_gain_dbi", "radar_p_detect", "radar_rcs_dbsm", "radar_snr_db", "with_param",
 ]

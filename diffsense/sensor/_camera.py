@@ -12,13 +12,13 @@ with sigma = bearing_error_px / k.
 from __future__ import annotations
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PRNGKeyArray
+from jaxtyping import Array, Float
 
 from diffsense.scene import Scene
 from diffsense.sensor._datatypes import Detections
 from diffsense.sensor._gates import Mode
-from diffsense.sensor._geometry import polar, vehicle_occlusion
-from diffsense.sensor._measure import detect_of, p_detect_of
+from diffsense.sensor._geometry import Tracks, polar, vehicle_occlusion
+from diffsense.sensor._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensor._params import CameraConfig, CameraParams
 
 
@@ -35,11 +35,11 @@ def camera_depth_sigma_m(
     return range_m**2 * config.disparity_error_px / (k * params.baseline_m)
 
 
-def _camera_terms(scene: Scene, params: CameraParams, config: CameraConfig, mode: Mode,
+def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mode: Mode,
                   temperature):
-    range_m, azimuth_rad = polar(scene, config.mount_x_m)
+    range_m, azimuth_rad = polar(tracks, config.mount_x_m)
     tau = config.temperature
-    half, hidden = vehicle_occlusion(scene, range_m, azimuth_rad, config.mount_x_m, mode,
+    half, hidden = vehicle_occlusion(tracks, range_m, azimuth_rad, config.mount_x_m, mode,
                                      tau.near_m * temperature, tau.overlap_deg * temperature)
     k = camera_px_per_rad(params)
     gates = (
@@ -65,7 +65,7 @@ def camera_p_detect(
 
 
 def camera_detect(
-    scene: Scene, params: CameraParams, config: CameraConfig, key: PRNGKeyArray, *,
+    scene: Scene, params: CameraParams, config: CameraConfig, key: KeyOrNoise, *,
     mode: Mode = "soft", temperature: float | Float[Array, ""] = 1.0,
 ) -> Detections:
     """Camera `Detections` [T, V]: p_detect and noisy stereo depth/bearing in the world."""

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import jax
-from jaxtyping import Array, Float, PRNGKeyArray
+import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from diffsense.errors import InputError
 from diffsense.scene import Scene
 from diffsense.sensor._camera import camera_detect, camera_p_detect
 from diffsense.sensor._datatypes import Detections
 from diffsense.sensor._gates import Mode
+from diffsense.sensor._measure import KeyOrNoise, measurement_noise
 from diffsense.sensor._params import CameraConfig, CameraParams, RadarConfig, RadarParams
 from diffsense.sensor._radar import radar_detect, radar_p_detect
 
@@ -28,14 +30,15 @@ def _pick(params: Params, config: Config):
 
 
 def detect(
-    scene: Scene, params: Params, config: Config, key: PRNGKeyArray, *, mode: Mode = "soft",
+    scene: Scene, params: Params, config: Config, key: KeyOrNoise, *, mode: Mode = "soft",
     temperature: float | Float[Array, ""] = 1.0,
 ) -> Detections:
     """The sensor described by (`params`, `config`) looking at `scene` [T, V].
 
     `mode` "soft" gives detection probabilities differentiable in every parameter; "hard" the
     0/1 detections. `key` fixes the measurement-noise draws (common random numbers across
-    parameters). `temperature` scales all soft-gate temperatures of `config`.
+    parameters); it may instead be the draws themselves, [2, T, V] from
+    `measurement_noise(key, scene)`, to draw once outside a loop over parameters. `temperature` scales all soft-gate temperatures of `config`.
     """
     sensor_detect, _ = _pick(params, config)
     return sensor_detect(scene, params, config, key, mode=mode, temperature=temperature)
@@ -51,16 +54,16 @@ def p_detect(
 
 
 def detect_batch(
-    scenes: Scene, params: Params, config: Config, key: PRNGKeyArray, *, mode: Mode = "soft",
+    scenes: Scene, params: Params, config: Config, key: KeyOrNoise, *, mode: Mode = "soft",
     temperature: float | Float[Array, ""] = 1.0,
 ) -> Detections:
     """`detect` over a batch of scenes [N, T, V] with shared parameters; one noise key each.
 
     Scene n draws its noise from `jax.random.fold_in(key, n)` (with the default threefry keys
-    exactly the draws of `detect(scenes[n], ..., fold_in(key, n))`).
+    exactly the draws of `detect(scenes[n], ..., fold_in(key, n))`). `key` may instead be the
+    draws themselves, [N, 2, T, V] from `measurement_noise(key, scenes)`.
     """
-    n = scenes.x_m.shape[0]
-    keys = jax.vmap(lambda i: jax.random.fold_in(key, i))(jax.numpy.arange(n))
+    noise = key if jnp.issubdtype(key.dtype, jnp.floating) else measurement_noise(key, scenes)
     return jax.vmap(
-        lambda scene, k: detect(scene, params, config, k, mode=mode, temperature=temperature)
-    )(scenes, keys)
+        lambda scene, draws: detect(scene, params, config, draws, mode=mode, temperature=temperature)
+    )(scenes, noise)

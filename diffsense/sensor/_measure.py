@@ -2,7 +2,9 @@
 
 Noise uses common random numbers: the standard-normal draws are fixed by the key (one pair per
 frame and vehicle, for range and azimuth) and only their scale depends on the parameters r, so
-every quantity that depends on r is a smooth, deterministic function of it.
+every quantity that depends on r is a smooth, deterministic function of it. The draws can also be
+made once with `measurement_noise` and passed instead of the key, so that a loop over r does not
+regenerate them.
 """
 
 from __future__ import annotations
@@ -11,60 +13,79 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from diffsense.errors import InputError
 from diffsense.scene import EGO_INDEX, Scene
 from diffsense.sensor._datatypes import Detections
 from diffsense.sensor._gates import check_mode, p_from_gates
-from diffsense.sensor._geometry import to_world
+from diffsense.sensor._geometry import Tracks, to_world
+
+KeyOrNoise = PRNGKeyArray | Float[Array, "2 T V"]
 
 
-def own_and_padding(scene: Scene, p: Float[Array, "T V"]) -> Float[Array, "T V"]:
-    """p with the ego set to 1 (its own state is known) and padding vehicles to 0."""
-    p = jnp.where(scene.present[..., None, :] != 0, p, 0.0)
-    return p.at[..., EGO_INDEX].set(1.0)
+def measurement_noise(key: PRNGKeyArray, scene: Scene) -> Float[Array, "*N 2 T V"]:
+    """The standard-normal draws (range, azimuth) of `detect` / `detect_batch` for `key`.
+
+    One scene [T, V] gives [2, T, V]; a batch [N, T, V] gives [N, 2, T, V], scene n drawn from
+    `jax.random.fold_in(key, n)`. Dtype: that of the scene's positions.
+    """
+    shape, dtype = scene.x_m.shape, scene.x_m.dtype
+    if len(shape) == 2:
+        return jax.random.normal(key, (2, *shape), dtype=dtype)
+    if len(shape) == 3:
+        keys = jax.vmap(lambda n: jax.random.fold_in(key, n))(jnp.arange(shape[0]))
+        return jax.vmap(lambda k: jax.random.normal(k, (2, *shape[1:]), dtype=dtype))(keys)
+    raise InputError(f"a scene has positions [T, V] or [N, T, V], got shape {shape}")
 
 
-def standard_normals(key: PRNGKeyArray, scene: Scene, dtype) -> Float[Array, "2 T V"]:
-    """The fixed draws (range, azimuth) for every frame and vehicle of `scene`."""
-    return jax.random.normal(key, (2, *scene.x_m.shape), dtype=dtype)
+def _noise(key_or_noise: KeyOrNoise, scene: Scene) -> Float[Array, "2 T V"]:
+    if jnp.issubdtype(key_or_noise.dtype, jnp.floating):
+        expected = (2, *scene.x_m.shape)
+        if key_or_noise.shape != expected:
+            raise InputError(f"measurement noise has shape {key_or_noise.shape}, expected {expected}")
+        return key_or_noise.astype(scene.x_m.dtype)
+    return measurement_noise(key_or_noise, scene)
 
 
-def detections(
-    scene: Scene,
-    mount_x_m: float,
-    p: Float[Array, "T V"],
-    range_m: Float[Array, "T V"],
-    azimuth_rad: Float[Array, "T V"],
-    range_sigma_m: Float[Array, "T V"],
-    azimuth_sigma_rad: Float[Array, "T V"],
-    key: PRNGKeyArray,
-) -> Detections:
-    """Noisy sensor-frame measurements converted to world `Detections` with the ego pose."""
-    noise = standard_normals(key, scene, range_m.dtype)
-    x, y = to_world(
-        scene,
-        mount_x_m,
-        range_m + range_sigma_m * noise[0],
-        azimuth_rad + azimuth_sigma_rad * noise[1],
-    )
-    known = jnp.arange(scene.x_m.shape[-1]) == EGO_INDEX
-    known = known | (scene.present[..., None, :] == 0)
-    x = jnp.where(known, scene.x_m, x)
-    y = jnp.where(known, scene.y_m, y)
-    return Detections(p_detect=own_and_padding(scene, p), x_m=x, y_m=y)
+def tracks_of(scene: Scene) -> Tracks:
+    if scene.x_m.ndim != 2:
+        raise InputError(f"one scene [T, V] expected, got positions of shape {scene.x_m.shape} "
+                         "(use detect_batch for a batch)")
+    return Tracks.of(scene)
+
+
+def own_and_padding(tracks: Tracks, p: Float[Array, "V T"]) -> Float[Array, "T V"]:
+    """p [T, V] with the ego set to 1 (its own state is known) and padding vehicles to 0."""
+    p = jnp.where(tracks.present, p, 0.0)
+    return _transposed(p.at[EGO_INDEX].set(1.0))
+
+
+def _transposed(a: Float[Array, "V T"]) -> Float[Array, "T V"]:
+    # The barrier keeps XLA from fusing the transpose into the math above, which would run it
+    # in the [T, V] layout (vehicle axis minor) that vectorises badly on CPU.
+    return jax.lax.optimization_barrier(a).T
 
 
 def p_detect_of(terms, scene: Scene, params, config, mode: str, temperature) -> Float[Array, "T V"]:
     """p_detect of a sensor given its `terms` function (gates, range, azimuth, noise scales)."""
     mode = check_mode(mode)
-    gates = terms(scene, params, config, mode, temperature)[0]
-    return own_and_padding(scene, p_from_gates(gates, mode))
+    tracks = tracks_of(scene)
+    gates = terms(tracks, params, config, mode, temperature)[0]
+    return own_and_padding(tracks, p_from_gates(gates, mode))
 
 
-def detect_of(terms, scene: Scene, params, config, key: PRNGKeyArray, mode: str,
+def detect_of(terms, scene: Scene, params, config, key_or_noise: KeyOrNoise, mode: str,
               temperature) -> Detections:
-    """`Detections` of a sensor given its `terms` function."""
+    """`Detections` of a sensor given its `terms` function: noisy sensor-frame measurements
+    converted to the world with the ego pose."""
     mode = check_mode(mode)
+    tracks = tracks_of(scene)
     gates, range_m, azimuth_rad, range_sigma, azimuth_sigma = terms(
-        scene, params, config, mode, temperature)
-    return detections(scene, config.mount_x_m, p_from_gates(gates, mode), range_m, azimuth_rad,
-                      range_sigma, azimuth_sigma, key)
+        tracks, params, config, mode, temperature)
+    noise = jax.lax.optimization_barrier(jnp.swapaxes(_noise(key_or_noise, scene), -1, -2))
+    x, y = to_world(tracks, config.mount_x_m, range_m + range_sigma * noise[0],
+                    azimuth_rad + azimuth_sigma * noise[1])
+    known = (jnp.arange(x.shape[0]) == EGO_INDEX)[:, None] | ~tracks.present
+    x = jnp.where(known, tracks.x_m, x)
+    y = jnp.where(known, tracks.y_m, y)
+    return Detections(p_detect=own_and_padding(tracks, p_from_gates(gates, mode)),
+                      x_m=_transposed(x), y_m=_transposed(y))

@@ -16,13 +16,13 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int, PRNGKeyArray
+from jaxtyping import Array, Float, Int
 
 from diffsense.scene import Scene
 from diffsense.sensor._datatypes import Detections
 from diffsense.sensor._gates import Mode
-from diffsense.sensor._geometry import polar, vehicle_occlusion
-from diffsense.sensor._measure import detect_of, p_detect_of
+from diffsense.sensor._geometry import Tracks, polar, vehicle_occlusion
+from diffsense.sensor._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensor._params import RadarConfig, RadarParams
 
 _SPEED_OF_LIGHT_MPS = 299_792_458.0
@@ -58,13 +58,13 @@ def radar_rcs_dbsm(kind: Int[Array, "V"], config: RadarConfig) -> Float[Array, "
     return table[kind]
 
 
-def _radar_terms(scene: Scene, params: RadarParams, config: RadarConfig, mode: Mode, temperature):
-    range_m, azimuth_rad = polar(scene, config.mount_x_m)
+def _radar_terms(tracks: Tracks, params: RadarParams, config: RadarConfig, mode: Mode, temperature):
+    range_m, azimuth_rad = polar(tracks, config.mount_x_m)
     tau = config.temperature
-    _, shadow = vehicle_occlusion(scene, range_m, azimuth_rad, config.mount_x_m, mode,
+    _, shadow = vehicle_occlusion(tracks, range_m, azimuth_rad, config.mount_x_m, mode,
                                   tau.near_m * temperature, tau.overlap_deg * temperature)
-    rcs = radar_rcs_dbsm(scene.kind, config).astype(range_m.dtype)
-    snr_db = radar_snr_db(range_m, rcs[..., None, :], params, config)
+    rcs = radar_rcs_dbsm(tracks.kind, config).astype(range_m.dtype)  # [V, 1]
+    snr_db = radar_snr_db(range_m, rcs, params, config)
     snr_db = snr_db - config.occlusion_loss_db * shadow
     gates = (
         (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
@@ -91,7 +91,7 @@ def radar_p_detect(
 
 
 def radar_detect(
-    scene: Scene, params: RadarParams, config: RadarConfig, key: PRNGKeyArray, *,
+    scene: Scene, params: RadarParams, config: RadarConfig, key: KeyOrNoise, *,
     mode: Mode = "soft", temperature: float | Float[Array, ""] = 1.0,
 ) -> Detections:
     """Radar `Detections` [T, V]: p_detect and noisy range/azimuth measurements in the world."""

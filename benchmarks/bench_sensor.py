@@ -1,0 +1,122 @@
+"""Benchmark: soft sensor detections for the paper's six scenarios x 32 variants (by hand).
+
+    python benchmarks/bench_sensor.py [--variants 32] [--repeats 20] [--x64] [--synthetic]
+
+For each sensor it times one jitted call over all 6 x N scenes (10 Hz, 20 s): soft p_detect and
+noisy measurements (value), and the same with the gradient with respect to every sensor
+parameter (value + grad). Compile time is reported apart from the per-call time (median and
+best of `--repeats` calls after compilation). Target: < 50 ms per call after compilation.
+Scenes come from the scene engine (diffsense.scene), reduced to their relevant vehicles;
+`--synthetic` uses straight-road scenes of 8 vehicles instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+TARGET_MS = 50.0
+
+
+def engine_scenes(num_variants: int, dtype) -> list:
+    from diffsense.scene import list_scenarios, load_scenario, relevant_vehicles, simulate_scenario
+
+    scenes = []
+    for i, name in enumerate(list_scenarios()):
+        batch = simulate_scenario(load_scenario(name), num_variants, jax.random.key(i), dtype=dtype)
+        scenes.append(relevant_vehicles(batch))
+    return scenes
+
+
+def synthetic_scenes(num_variants: int, dtype, num_frames: int = 201, num_vehicles: int = 8):
+    from diffsense.scene import Scene
+
+    rng = np.random.default_rng(0)
+    scenes = []
+    for _ in range(6):
+        shape = (num_variants, num_frames, num_vehicles)
+        x0 = rng.uniform(-40.0, 120.0, (num_variants, 1, num_vehicles))
+        x0[:, :, 0] = 0.0
+        v = rng.uniform(20.0, 30.0, (num_variants, 1, num_vehicles))
+        t = np.arange(num_frames)[None, :, None] * 0.1
+        x = x0 + v * t
+        y = np.broadcast_to(rng.integers(-1, 2, (num_variants, 1, num_vehicles)) * 3.7, shape)
+        zeros = np.zeros(shape)
+        a = lambda z: jnp.asarray(z, dtype)  # noqa: E731
+        scenes.append(Scene(
+            s_m=a(x), d_m=a(y), x_m=a(x), y_m=a(y), heading_rad=a(zeros), road_angle_rad=a(zeros),
+            speed_mps=a(np.broadcast_to(v, shape)), lane=jnp.zeros(shape, jnp.int32),
+            length_m=a(np.full((num_variants, num_vehicles), 4.5)),
+            width_m=a(np.full((num_variants, num_vehicles), 1.8)),
+            kind=jnp.zeros((num_variants, num_vehicles), jnp.int32),
+            role=jnp.broadcast_to(jnp.minimum(jnp.arange(num_vehicles), 5), (num_variants, num_vehicles)),
+            present=jnp.ones((num_variants, num_vehicles), bool)))
+    return scenes
+
+
+def make_objective(config):
+    from diffsense import sensor
+
+    def objective(params, scenes, key):
+        total = 0.0
+        for i, batch in enumerate(scenes):
+            det = sensor.detect_batch(batch, params, config, jax.random.fold_in(key, i))
+            # something that needs both the probabilities and the measured positions
+            total = total + jnp.mean(det.p_detect * (det.x_m + det.y_m))
+        return total
+
+    return objective
+
+
+def time_calls(fn, args, repeats: int):
+    t0 = time.perf_counter()
+    compiled = jax.jit(fn).lower(*args).compile()
+    compile_s = time.perf_counter() - t0
+    jax.block_until_ready(compiled(*args))  # warm-up
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(compiled(*args))
+        times.append(1e3 * (time.perf_counter() - t0))
+    return compile_s, statistics.median(times), min(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--variants", type=int, default=32)
+    parser.add_argument("--repeats", type=int, default=20)
+    parser.add_argument("--x64", action="store_true", help="float64 scenes and parameters")
+    parser.add_argument("--synthetic", action="store_true", help="synthetic scenes, V = 8")
+    args = parser.parse_args()
+    jax.config.update("jax_enable_x64", args.x64)
+    dtype = jnp.float64 if args.x64 else jnp.float32
+    from diffsense import sensor
+
+    t0 = time.perf_counter()
+    scenes = (synthetic_scenes if args.synthetic else engine_scenes)(args.variants, dtype)
+    build_s = time.perf_counter() - t0
+    shapes = sorted({tuple(s.x_m.shape) for s in scenes})
+    print(f"jax {jax.__version__} on {jax.devices()[0].device_kind}, {dtype.__name__}; "
+          f"{len(scenes)} scenarios, scene batches [N, T, V] {shapes} "
+          f"({'synthetic' if args.synthetic else 'scene engine'}, built in {build_s:.1f} s)")
+    key = jax.random.key(0)
+    header = f"{'sensor':<8}{'call':<14}{'compile [s]':>12}{'median [ms]':>13}{'best [ms]':>11}  target < {TARGET_MS:g} ms"
+    print(header)
+    print("-" * len(header))
+    for name in sensor.SENSORS:
+        config = sensor.load_config(name)
+        params = jax.tree.map(lambda v: jnp.asarray(v, dtype), config.params)
+        objective = make_objective(config)
+        for label, fn in (("value", objective), ("value+grad", jax.value_and_grad(objective))):
+            compile_s, median_ms, best_ms = time_calls(fn, (params, scenes, key), args.repeats)
+            verdict = "ok" if median_ms < TARGET_MS else "MISSED"
+            print(f"{name:<8}{label:<14}{compile_s:>12.2f}{median_ms:>13.1f}{best_ms:>11.1f}  {verdict}")
+
+
+if __name__ == "__main__":
+    main()
