@@ -12,6 +12,7 @@ from diffsense.predict._api import (
     predict_mean,
     predict_mean_dense,
     predict_model_frame,
+    select_mean,
 )
 from diffsense.predict._checkpoint import read_state_dict
 from diffsense.predict._convert import model_from_state_dict, state_dict_from_model
@@ -49,6 +50,7 @@ __all__ = [
     "reference_forward",
     "reference_to_compact",
     "save_weights",
+    "select_mean",
     "si_to_model",
     "state_dict_from_model",
 ]

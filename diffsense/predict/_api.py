@@ -93,7 +93,8 @@ def predict_model_frame(
     return predictor.model(hist.dtype).compact(hist, nbr_hist, nbr_slot, nbr_weight)
 
 
-def _select(pred: Prediction, mode: Mode) -> Float[Array, "B 25 2"]:
+def select_mean(pred: Prediction, mode: Mode = "most_probable") -> Float[Array, "B 25 2"]:
+    """The mean trajectory [B, 25, 2] of a prediction (model frame), chosen by `mode` (see above)."""
     mu = pred.fut[..., :2]  # [B, K, 25, 2]
     if mu.shape[1] == 1:
         return mu[:, 0]
@@ -116,7 +117,7 @@ def predict_mean(
     """Future mean [B, 25, 2] in SI from compact neighbours (only the N listed are encoded)."""
     model = predictor.model(hist_m.dtype)
     pred = model.compact(si_to_model(hist_m), si_to_model(nbr_hist_m), nbr_slot, nbr_weight)
-    return model_to_si(_select(pred, mode))
+    return model_to_si(select_mean(pred, mode))
 
 
 def predict_mean_dense(
@@ -129,4 +130,4 @@ def predict_mean_dense(
     """Future mean [B, 25, 2] in SI from the dense grid (all 39 slots encoded)."""
     model = predictor.model(hist_m.dtype)
     pred = model(si_to_model(hist_m), si_to_model(nbrs_m), occupancy.astype(hist_m.dtype))
-    return model_to_si(_select(pred, mode))
+    return model_to_si(select_mean(pred, mode))

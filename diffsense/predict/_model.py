@@ -165,6 +165,16 @@ class CSLSTM(nnx.Module):
 
         Slots outside 0..38 are ignored (padding); two neighbours in one slot add up.
         """
+        return self.heads(self.context_compact(hist, nbr_hist, nbr_slot, nbr_weight))
+
+    def context_compact(
+        self,
+        hist: Float[Array, "B 16 2"],
+        nbr_hist: Float[Array, "B N 16 2"],
+        nbr_slot: Int[Array, "B N"],
+        nbr_weight: Float[Array, "B N"],
+    ) -> Float[Array, "B 112"]:
+        """The decoder context from compact input (see `compact`)."""
         b, n = nbr_slot.shape
         enc = self.encode_tracks(jnp.concatenate([hist[:, None], nbr_hist], axis=1))
         valid = (nbr_slot >= 0) & (nbr_slot < N_SLOTS)
@@ -172,7 +182,7 @@ class CSLSTM(nnx.Module):
         rows = jnp.broadcast_to(jnp.arange(b)[:, None], (b, n))
         grid = jnp.zeros((b, N_SLOTS + 1, ENC_SIZE), enc.dtype)
         grid = grid.at[rows, slot].add(nbr_weight[..., None].astype(enc.dtype) * enc[:, 1:])
-        return self.heads(self.context(enc[:, 0], grid[:, :N_SLOTS]))
+        return self.context(enc[:, 0], grid[:, :N_SLOTS])
 
 
 def new_model(maneuvers: bool, seed: int) -> CSLSTM:

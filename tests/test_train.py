@@ -1,0 +1,133 @@
+"""Training: resume equals an uninterrupted run, the model card, losses finite, config errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import _tiny_traffic
+from diffsense.config import from_dict
+from diffsense.errors import InputError
+from diffsense.predict import load_predictor, predict_mean, read_card, state_dict_from_model
+from diffsense.predict import load_weights
+from diffsense.train import TrainConfig, constant_velocity_m, load_samples, rmse_per_second, train
+from diffsense.train._loss import class_bce, mse, nll
+
+
+def _cfg(tmp_path, data, name: str, maneuvers: bool = False, **optim) -> TrainConfig:
+    return from_dict(TrainConfig, {
+        "maneuvers": maneuvers,
+        "data": {"path": str(data), "val_fraction": 0.25},
+        "optim": {"batch_size": 16, "mse_epochs": 1, "nll_epochs": 1, "seed": 3, **optim},
+        "run": {"checkpoint_dir": str(tmp_path / name / "ckpt"), "checkpoint_every_steps": 2,
+                "weights": str(tmp_path / name / "w.msgpack"), "val_batch_size": 32},
+    })
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    return _tiny_traffic.write(tmp_path_factory.mktemp("traffic") / "ds")
+
+
+def test_resume_equals_uninterrupted(tmp_path, data):
+    maneuvers = True  # the variant with every loss term (NLL + both class losses)
+    # NLL epochs only: one compiled step (the MSE step is exercised by the single-mode test).
+    full_cfg = _cfg(tmp_path, data, "full", maneuvers, mse_epochs=0, nll_epochs=2)
+    card = train(full_cfg, progress=False, log=lambda _: None)
+    part_cfg = _cfg(tmp_path, data, "part", maneuvers, mse_epochs=0, nll_epochs=2)
+    assert train(part_cfg, progress=False, stop_after_steps=5) == {}  # interrupted after step 5
+    assert not (tmp_path / "part" / "w.msgpack").exists()
+    resumed = train(part_cfg, resume=True, progress=False, log=lambda _: None)  # from step 4
+    a = state_dict_from_model(load_weights(tmp_path / "full" / "w.msgpack"))
+    b = state_dict_from_model(load_weights(tmp_path / "part" / "w.msgpack"))
+    for key in a:
+        assert np.array_equal(a[key], b[key]), key
+    assert resumed["history"] == card["history"]
+    assert resumed["validation"] == card["validation"]
+    # The card: steps, data, per-second RMSE of the network and of constant velocity.
+    assert card["steps"] == 2 * (72 // 16) and card["maneuvers"] is maneuvers
+    assert card["data"]["num_train_samples"] == 72 and card["data"]["num_val_samples"] == 24
+    assert len(card["validation"]["rmse_m"]["cslstm"]) == 5
+    assert len(card["validation"]["rmse_m"]["constant_velocity"]) == 5
+    assert all(np.isfinite(card["validation"]["rmse_m"]["cslstm"]))
+    assert read_card(tmp_path / "full" / "w.msgpack") == card
+    assert (tmp_path / "full" / "w.msgpack").stat().st_size < 2_000_000
+    # The weights serve the SI predictor directly.
+    predictor = load_predictor(tmp_path / "full" / "w.msgpack")
+    samples, _ = load_samples(data)
+    out = jax.jit(predict_mean)(predictor, samples.hist_m[:4], np.zeros((4, 1, 16, 2), np.float32),
+                                np.full((4, 1), -1, np.int32), np.zeros((4, 1), np.float32))
+    assert out.shape == (4, 25, 2) and out.dtype == jnp.float32
+
+
+def test_single_mode_trains_and_resume_needs_a_checkpoint(tmp_path, data):
+    with pytest.raises(InputError, match="no checkpoint"):
+        train(_cfg(tmp_path, data, "none"), resume=True, progress=False)
+    card = train(_cfg(tmp_path, data, "single", mse_epochs=1, nll_epochs=0), progress=False)
+    assert card["maneuvers"] is False and card["steps"] == 72 // 16
+    assert all(np.isfinite(card["validation"]["rmse_m"]["cslstm"]))
+
+
+def test_samples_are_converted_to_the_model_frame(data):
+    samples, meta = load_samples(data)
+    assert len(samples) == 96 and meta["config"] == {"tiny": True}
+    np.testing.assert_allclose(samples.hist[..., 1], samples.hist_m[..., 0] / 0.3048, rtol=1e-6)
+    np.testing.assert_allclose(samples.hist[..., 0], -samples.hist_m[..., 1] / 0.3048, rtol=1e-6, atol=1e-6)
+    present = samples.nbr_weight > 0
+    assert np.all(samples.nbr_slot[present] >= 0) and np.all(samples.nbr_slot[~present] == -1)
+
+
+def test_metrics_and_constant_velocity():
+    t = 0.2 * np.arange(-15, 1)
+    hist = np.stack([25.0 * t, 0.5 * t], -1)[None]
+    fut_cv = constant_velocity_m(hist, 2)
+    np.testing.assert_allclose(fut_cv[0, 4], [25.0, 0.5], atol=1e-12)  # 1 s ahead
+    np.testing.assert_allclose(rmse_per_second(fut_cv, fut_cv), np.zeros(5))
+    shifted = fut_cv + np.array([3.0, 4.0])
+    np.testing.assert_allclose(rmse_per_second(shifted, fut_cv), np.full(5, 5.0))
+
+
+def test_losses_finite_and_gradients_at_extremes():
+    fut = jnp.ones((2, 25, 2))
+    for scale in (0.0, 1e3):
+        raw = jnp.full((2, 25, 5), scale)
+        logits = jnp.array([[scale, -scale, 0.0], [0.0, 0.0, 0.0]])
+        label = jnp.array([1, 2])
+        for fn, args in ((nll, (raw, fut)), (mse, (raw, fut)), (class_bce, (logits, label))):
+            value, grad = jax.value_and_grad(fn)(*args)
+            assert np.isfinite(value) and np.all(np.isfinite(grad)), fn.__name__
+    # NLL equals the closed form of the bivariate Gaussian density at moderate values.
+    raw = jnp.array([[[0.3, -0.2, np.log(2.0), np.log(0.5), np.arctanh(0.3)]]])
+    y = jnp.array([[[1.0, 0.5]]])
+    sx, sy, rho = 0.5, 2.0, 0.3  # standard deviations are the inverses of exp(raw)
+    dx, dy = 0.7, 0.7
+    z = dx**2 / sx**2 + dy**2 / sy**2 - 2 * rho * dx * dy / (sx * sy)
+    want = z / (2 * (1 - rho**2)) + np.log(2 * np.pi * sx * sy * np.sqrt(1 - rho**2))
+    np.testing.assert_allclose(nll(raw, y), want, rtol=1e-6)
+
+
+def test_cli_bad_config_is_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('maneuvers = false\n[data]\npath = "x"\nvall_fraction = 0.1\n')
+    proc = subprocess.run([sys.executable, "-m", "diffsense.train", "--config", str(bad)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "unknown key 'data.vall_fraction'" in proc.stderr
+    assert proc.stderr.strip().count("\n") == 0
+    good_paths = tmp_path / "nodata.toml"
+    good_paths.write_text(f'[data]\npath = "{tmp_path / "absent"}"\n')
+    proc = subprocess.run([sys.executable, "-m", "diffsense.train", "--config", str(good_paths)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "not a traffic dataset" in proc.stderr, proc.stderr
+
+
+def test_shipped_default_config_loads():
+    from diffsense.config import load_default
+
+    cfg = load_default(TrainConfig, "train/default.toml")
+    assert dataclasses.asdict(cfg.optim)["learning_rate"] == 1e-3 and cfg.optim.batch_size == 128
