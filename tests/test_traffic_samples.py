@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -197,6 +198,23 @@ def test_cli_writes_a_readable_dataset(tmp_path, monkeypatch, dataset, capsys):
     assert e.value.code == 2 and "already exists" in capsys.readouterr().err
 
 
+@pytest.mark.slow
+def test_cli_process_without_x64_writes_the_same_samples(tmp_path, dataset):
+    # The tests run with jax_enable_x64; `python -m diffsense.scene generate` without: same bits.
+    config = tmp_path / "traffic.toml"
+    config.write_text(_toml(to_dict(CFG)))
+    out = tmp_path / "set"
+    proc = subprocess.run(
+        [sys.executable, "-m", "diffsense.scene", "generate", "--config", str(config), "--out", str(out),
+         "--samples", str(NUM), "--seed", "11", "--no-progress"],
+        capture_output=True, text=True, timeout=600, env=dict(os.environ, DIFFSENSE_NO_CACHE="1"),
+    )
+    assert proc.returncode == 0, proc.stderr
+    (shard,) = read_dataset(out)
+    for k in dataset:
+        np.testing.assert_array_equal(shard[k], dataset[k], err_msg=k)
+
+
 def test_reading_refuses_broken_datasets(tmp_path, dataset):
     with pytest.raises(InputError, match="no meta.json"):
         list(read_dataset(tmp_path))
@@ -204,6 +222,12 @@ def test_reading_refuses_broken_datasets(tmp_path, dataset):
     np.savez(tmp_path / "shard_00000.npz", **bad)
     (tmp_path / "meta.json").write_text('{"layout_version": 1, "shards": [{"file": "shard_00000.npz"}]}')
     with pytest.raises(InputError, match="NaN"):
+        list(read_dataset(tmp_path))
+    np.savez(tmp_path / "shard_00000.npz", **dict(dataset, lat_label=np.full(NUM, 3, np.int8)))
+    with pytest.raises(InputError, match="labels out of range"):
+        list(read_dataset(tmp_path))
+    np.savez(tmp_path / "shard_00000.npz", **dict(dataset, nbr_slot=dataset["nbr_slot"].astype(np.int64)))
+    with pytest.raises(InputError, match="nbr_slot is int64"):
         list(read_dataset(tmp_path))
 
 

@@ -229,10 +229,11 @@ def _idm_of(p: IDMParams, index: Int[Array, "..."]) -> IDMParams:
 
 def lateral_offset_m(state: TrafficState, lane_width_m: float) -> Float[Array, "V"]:
     """Lateral offset of each vehicle centre from the right road edge [m]."""
-    d_from = (state.lane + 0.5) * lane_width_m
-    d_to = (state.target_lane + 0.5) * lane_width_m
+    dtype = state.s_m.dtype  # float32 stays float32 under jax_enable_x64 (same data either way)
+    d_from = (state.lane.astype(dtype) + 0.5) * lane_width_m
+    d_to = (state.target_lane.astype(dtype) + 0.5) * lane_width_m
     progress = quintic_progress(state.since_change_s, 0.0, state.change_duration_s)
-    return (d_from + (d_to - d_from) * progress).astype(state.s_m.dtype)
+    return d_from + (d_to - d_from) * progress
 
 
 def _neighbours(state: TrafficState, vehicles: TrafficVehicles):

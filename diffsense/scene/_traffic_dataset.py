@@ -238,6 +238,11 @@ def read_shard(file: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     for k in ("hist", "fut", "nbr_hist"):
         if not np.isfinite(shard[k]).all():
             raise InputError(f"shard {file}: {k} holds NaN or inf")
-    if m and (shard["nbr_sample"].min() < 0 or shard["nbr_sample"].max() >= s or shard["nbr_slot"].min() < 0 or shard["nbr_slot"].max() >= GRID_SLOTS):
-        raise InputError(f"shard {file}: neighbour rows or grid ids out of range")
+    rows = shard["nbr_sample"]
+    if m and (rows.min() < 0 or rows.max() >= s or (np.diff(rows) < 0).any()):
+        raise InputError(f"shard {file}: nbr_sample must be non-decreasing rows 0..{s - 1}")
+    if m and (shard["nbr_slot"].min() < 0 or shard["nbr_slot"].max() >= GRID_SLOTS):
+        raise InputError(f"shard {file}: nbr_slot must be grid ids 0..{GRID_SLOTS - 1}")
+    if s and not (0 <= shard["lat_label"].min() and shard["lat_label"].max() <= 2 and 0 <= shard["lon_label"].min() and shard["lon_label"].max() <= 1):
+        raise InputError(f"shard {file}: labels out of range (lat 0..2, lon 0..1)")
     return shard
