@@ -109,6 +109,16 @@ def test_followers_keep_the_minimum_gap_in_steady_state(scenes, name):
     assert gap[:, steady:].min() >= driver.min_gap_m
 
 
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_nominal_starts_in_steady_state_at_the_papers_relative_velocity(scenes, name):
+    cfg = load_scenario(name)
+    v = np.asarray(scenes[name].speed_mps[0], np.float64)  # variant 0 [T, V]
+    before = round(cfg.lane_change.start_s.low / SCENE_DT_S)
+    assert np.abs(np.diff(v[: before + 1], axis=0) / SCENE_DT_S).max() < 0.1  # [m/s2]
+    start = round(cfg.lane_change.start_s.nominal / SCENE_DT_S)
+    assert (v[start, 1] - v[start, 0]) * 3.6 == pytest.approx(5.0, abs=0.5)  # km/h, as in the paper
+
+
 def test_a_platoon_started_in_equilibrium_stays_there():
     """Five cars 50 m apart at 20 m/s: desired speeds make 50 m the IDM equilibrium gap.
 

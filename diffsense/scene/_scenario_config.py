@@ -165,7 +165,8 @@ class KindModel:
 class DriverModel:
     """IDM parameters shared by every scenario vehicle, and the simulation's limits.
 
-    The desired speed is not here: each vehicle's is derived from its start (see _variants.py).
+    Desired speeds and followers' time headways are not here: each vehicle's are derived from its
+    start so that the scene starts in steady state (see _simulate._idm).
     """
 
     time_headway_s: float
@@ -174,8 +175,16 @@ class DriverModel:
     comfort_decel_mps2: float
     accel_exponent: float
     max_brake_mps2: float
-    max_desired_speed_ratio: float
+    follower_speed_ratio: float
+    min_time_headway_s: float
+    max_time_headway_s: float
     lateral_margin_m: float
+
+    def __post_init__(self):
+        if not self.follower_speed_ratio > 1.0:
+            raise InputError(f"driver.follower_speed_ratio must be > 1, got {self.follower_speed_ratio}")
+        if not 0.0 < self.min_time_headway_s <= self.max_time_headway_s:
+            raise InputError("driver time headways need 0 < min_time_headway_s <= max_time_headway_s")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -49,23 +49,27 @@ def leaders(
 
 
 def _idm(plan: VehiclePlan, driver: DriverModel) -> IDMParams:
-    """Per-vehicle IDM whose desired speed makes the start gap the equilibrium gap.
+    """Per-vehicle IDM under which every vehicle starts in steady state.
 
-    From a = 0 at dv = 0: (v/v0)^delta = 1 - ((s0 + v T) / gap)^2. A free vehicle (or one closer
-    than s0 + v T) keeps its start speed as desired speed; the ratio is capped, and the desired
-    speed is at least MIN_DESIRED_SPEED_MPS, so that a vehicle starting at rest is well defined.
+    A vehicle with a leader within reach gets the desired speed `follower_speed_ratio` x its start
+    speed and the time headway T that makes its start gap g the equilibrium gap (from a = 0 at
+    dv = 0): T = (g sqrt(1 - ratio^-delta) - s0) / v, clipped to [min, max]_time_headway_s.
+    A vehicle whose leader is further than that reach (T would exceed the maximum) or absent is
+    free: desired speed = its start speed, the config's time headway. Desired speeds are at least
+    MIN_DESIRED_SPEED_MPS, so that a vehicle starting at rest is well defined.
     """
     gap, _ = leaders(plan.s_m, plan.d_from_m, plan.speed_mps, plan.length_m, plan.width_m,
                      driver.lateral_margin_m)
-    v = plan.speed_mps
-    ratio = (driver.min_gap_m + v * driver.time_headway_s) / gap
-    free = 1.0 - ratio**2
-    ok = free > 0.0
-    v0 = v / jnp.where(ok, free, 1.0) ** (1.0 / driver.accel_exponent)
-    v0 = jnp.clip(jnp.where(ok, v0, v), v, driver.max_desired_speed_ratio * v)
-    v0 = jnp.maximum(v0, MIN_DESIRED_SPEED_MPS)  # v / v0 with v0 = 0 would be 0 / 0
-    return IDMParams(v0, driver.time_headway_s, driver.min_gap_m, driver.max_accel_mps2,
-                     driver.comfort_decel_mps2, driver.accel_exponent)
+    v = jnp.maximum(plan.speed_mps, MIN_DESIRED_SPEED_MPS)
+    free_share = (1.0 - driver.follower_speed_ratio ** -driver.accel_exponent) ** 0.5
+    headway = (gap * free_share - driver.min_gap_m) / v
+    follows = headway <= driver.max_time_headway_s
+    return IDMParams(
+        desired_speed_mps=jnp.where(follows, driver.follower_speed_ratio * v, v),
+        time_headway_s=jnp.where(follows, jnp.maximum(headway, driver.min_time_headway_s), driver.time_headway_s),
+        min_gap_m=driver.min_gap_m, max_accel_mps2=driver.max_accel_mps2,
+        comfort_decel_mps2=driver.comfort_decel_mps2, accel_exponent=driver.accel_exponent,
+    )
 
 
 def simulate_plan(plan: VehiclePlan, road: Road, driver: DriverModel, num_frames: int, dt_s: float = SCENE_DT_S) -> Scene:
