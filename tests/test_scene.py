@@ -166,6 +166,12 @@ def test_same_seed_same_scene_bit_for_bit(scenes):
     assert not np.array_equal(other.s_m[1:], again.s_m[1:])
 
 
+def test_a_variant_does_not_depend_on_how_many_are_asked_for(scenes):
+    few = simulate_scenario(load_scenario("sc01"), 2, 7)  # an int seed is a key
+    for a, b in zip(jax.tree.leaves(few), jax.tree.leaves(scenes["sc01"])):
+        assert np.array_equal(np.asarray(a), np.asarray(b)[:2])
+
+
 def test_variant_zero_is_nominal_and_the_others_randomise(scenes):
     cfg = load_scenario("sc03")
     sc = _np(scenes["sc03"])

@@ -106,8 +106,8 @@ def simulate_plan(plan: VehiclePlan, road: Road, driver: DriverModel, num_frames
 @functools.partial(jax.jit, static_argnames=("driver", "num_variants", "num_frames"))
 def simulate_numbers(nums: ScenarioNumbers, road: Road, driver: DriverModel, key: PRNGKeyArray,
                      num_variants: int, num_frames: int) -> Scene:
-    """`simulate_scenario` on a scenario's arrays: one compilation per road, vehicle count and
-    shape, shared by every scenario (the config's values are traced, not baked in)."""
+    """`simulate_scenario` on a scenario's arrays: one compilation per (variants, frames, vehicles)
+    shared by every scenario and road (their values are traced, not baked in)."""
     keys = jax.random.split(key, num_variants)
     nominal = jnp.arange(num_variants) == 0
     plans = jax.vmap(draw_plan, in_axes=(None, 0, 0))(nums, keys, nominal)
@@ -115,13 +115,15 @@ def simulate_numbers(nums: ScenarioNumbers, road: Road, driver: DriverModel, key
 
 
 def simulate_scenario(
-    cfg: ScenarioConfig, num_variants: int, key: PRNGKeyArray, *, dtype=jnp.float32,
+    cfg: ScenarioConfig, num_variants: int, key: PRNGKeyArray | int, *, dtype=jnp.float32,
     road: Road | None = None, models: VehicleModels | None = None,
 ) -> Scene:
     """Simulate variant 0 (nominal) and `num_variants - 1` randomised variants: Scene [N, T, V].
 
     T = round(duration_s / 0.1) + 1 frames (t = 0 .. duration_s); V = 5 + background vehicles.
-    The road and vehicle models default to the shipped ones named by the config.
+    `key` is a PRNG key (or an int seed); variant k > 0 depends only on (key, k), so asking for
+    more variants keeps the earlier ones. The road and vehicle models default to the shipped ones
+    named by the config. Arrays are of `dtype` (float32 by default; float64 needs jax_enable_x64).
     """
     if not isinstance(num_variants, int) or num_variants < 1:
         raise InputError(f"num_variants must be a positive integer, got {num_variants!r}")
@@ -130,6 +132,8 @@ def simulate_scenario(
     for what, lane in (("ego.lane", cfg.ego.lane), ("target_lane", cfg.target_lane), ("adjacent_lane", cfg.adjacent_lane)):
         if not 0 <= lane < road.num_lanes:
             raise InputError(f"{cfg.name}: {what} {lane} is not a lane of road {cfg.road!r} (0..{road.num_lanes - 1})")
+    if isinstance(key, int):
+        key = jax.random.key(key)
     num_frames = round(cfg.duration_s / SCENE_DT_S) + 1
     nums = scenario_numbers(cfg, models, road, dtype)
     return simulate_numbers(nums, road, models.driver, key, num_variants, num_frames)

@@ -8,11 +8,11 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 
-from diffsense.scene._datatypes import KIND_NAMES, ROLE_NAMES, Scene
+from diffsense.scene._datatypes import EGO, KIND_NAMES, ROLE_NAMES, TARGET_INDEX, Scene
 from diffsense.scene._road import Road, frenet_to_cartesian
 
 ROLE_COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "0.6")
-_SNAPSHOT_S = 2.0  # body outlines drawn every 2 s
+_ZOOM_HALF_S = 3.0  # the bird's-eye panel shows +-3 s around the lane change
 
 
 def road_json(road: Road, name: str) -> dict[str, Any]:
@@ -65,34 +65,50 @@ def _draw_road(ax, road: Road, s_lo: float, s_hi: float, world: bool) -> None:
             ax.plot(s, d, **style)
 
 
+def _lane_change_frame(scene: Scene) -> int:
+    """The frame where the target's lateral speed peaks (mid lane change; the middle if none)."""
+    rate = np.abs(np.diff(np.asarray(scene.d_m[:, TARGET_INDEX])))
+    return int(rate.argmax()) if rate.max() > 0 else scene.num_frames // 2
+
+
 def scene_figure(scene: Scene, road: Road, title: str = "") -> Figure:
-    """Bird's-eye view (world x, y, true scale) above the road frame (s, d, lateral stretched)."""
-    fig = Figure(figsize=(14, 7.5), constrained_layout=True)
-    top, bottom = fig.subplots(2, 1)
-    present = np.asarray(scene.present)
+    """Top: bird's-eye view (world x, y, true scale) of the 6 s around the target's lane change.
+    Bottom: the whole scene in the road frame (s, d), lateral stretched."""
+    fig = Figure(figsize=(14, 8), constrained_layout=True)
+    top, bottom = fig.subplots(2, 1, height_ratios=(1.0, 1.2))
+    present = np.flatnonzero(np.asarray(scene.present))
     s_all = np.asarray(scene.s_m)[:, present]
     s_lo, s_hi = min(0.0, s_all.min() - 10.0), max(float(road.length_m), s_all.max() + 10.0)
-    _draw_road(top, road, s_lo, s_hi, world=True)
+    mid = _lane_change_frame(scene)
+    half = round(_ZOOM_HALF_S / scene.dt_s)
+    zoom = slice(max(mid - half, 0), min(mid + half + 1, scene.num_frames))
+    _draw_road(top, road, s_all[zoom].min() - 15.0, s_all[zoom].max() + 15.0, world=True)
     _draw_road(bottom, road, s_lo, s_hi, world=False)
-    step = max(1, round(_SNAPSHOT_S / scene.dt_s))
     seen = set()
-    for v in np.flatnonzero(present):
+    for v in present:
         role = int(scene.role[v])
-        colour = ROLE_COLOURS[role]
-        label = ROLE_NAMES[role] if role not in seen else None
+        style = dict(color=ROLE_COLOURS[role], lw=3.0 if role == EGO else 1.5,
+                     label=ROLE_NAMES[role] if role not in seen else None)
         seen.add(role)
         x, y, h = (np.asarray(a[:, v]) for a in (scene.x_m, scene.y_m, scene.heading_rad))
         s, d = np.asarray(scene.s_m[:, v]), np.asarray(scene.d_m[:, v])
-        top.plot(x, y, color=colour, lw=1.5, label=label)
-        bottom.plot(s, d, color=colour, lw=1.5, label=label)
-        length, width = float(scene.length_m[v]), float(scene.width_m[v])
-        for k in range(0, scene.num_frames, step):
-            alpha = 0.25 + 0.6 * k / max(scene.num_frames - 1, 1)
-            top.add_patch(Polygon(_outline(x[k], y[k], h[k], length, width), color=colour, alpha=alpha, lw=0))
-            bottom.add_patch(Polygon(_outline(s[k], d[k], 0.0, length, width), color=colour, alpha=alpha, lw=0))
-    top.set_aspect("equal")
-    top.set(xlabel="x [m]", ylabel="y [m]", title=title or "scene (bird's-eye view)")
+        top.plot(x[zoom], y[zoom], **style)
+        bottom.plot(s, d, **style)
+        size = float(scene.length_m[v]), float(scene.width_m[v])
+        _outlines(top, x, y, h, size, range(zoom.start, zoom.stop, round(1.0 / scene.dt_s)), style["color"])
+        _outlines(bottom, s, d, np.zeros_like(s), size, range(0, scene.num_frames, round(2.0 / scene.dt_s)), style["color"])
+    t0, t1 = zoom.start * scene.dt_s, (zoom.stop - 1) * scene.dt_s
+    top.set_aspect("equal", adjustable="datalim")
+    top.set(xlabel="x [m]", ylabel="y [m]", title=f"{title or 'scene'}\nbird's-eye view, t = {t0:.1f} .. {t1:.1f} s "
+            "around the lane change (outlines every 1 s, darker = later)")
     bottom.set(xlabel="s along the road [m]", ylabel="d to the left [m]",
-               title=f"road frame (lateral stretched); outlines every {_SNAPSHOT_S:g} s, darker = later")
+               title="whole scene in the road frame (lateral stretched; outlines every 2 s)")
     bottom.legend(loc="upper right", ncol=6, fontsize=8)
     return fig
+
+
+def _outlines(ax, x, y, heading, size, frames, colour) -> None:
+    frames = list(frames)
+    for n, k in enumerate(frames):
+        alpha = 0.2 + 0.6 * n / max(len(frames) - 1, 1)
+        ax.add_patch(Polygon(_outline(x[k], y[k], heading[k], *size), color=colour, alpha=alpha, lw=0))
