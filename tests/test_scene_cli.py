@@ -70,3 +70,21 @@ def test_exit_code_2_without_traceback(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.startswith("error: unknown scenario 'nope'") and proc.stderr.count("\n") == 1
     assert "Traceback" not in proc.stderr and not out.exists()
+
+
+def test_generate_is_routed_to_the_generator(monkeypatch):
+    import types
+
+    seen = []
+    fake = types.SimpleNamespace(main=lambda argv: seen.append(argv) or 7)
+    monkeypatch.setitem(sys.modules, "diffsense.scene._generate_cli", fake)
+    assert cli.main(["generate", "--out", "x"]) == 7 and seen == [["--out", "x"]]
+
+
+def test_generate_without_the_generator_is_one_line(monkeypatch):
+    def missing(name):
+        raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+
+    monkeypatch.setattr(cli.importlib, "import_module", missing)
+    with pytest.raises(InputError, match="training-traffic generator"):
+        cli.main(["generate"])
