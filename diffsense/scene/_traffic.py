@@ -239,25 +239,30 @@ def lateral_offset_m(state: TrafficState, lane_width_m: float) -> Float[Array, "
 def _neighbours(state: TrafficState, vehicles: TrafficVehicles):
     """Leader and follower of every vehicle in the lanes right of, at and left of its own.
 
-    Returns (leader, leader_dist, has_leader, follower, follower_dist, has_follower), each [V, 3];
-    distances are centre to centre along the ring [m].
+    Returns (leader, leader_dist, has_leader, follower, follower_dist, has_follower), each [V, 3],
+    and the [V, V] forward distances; distances are centre to centre along the ring [m].
     """
     s, ring = state.s_m, vehicles.ring_length_m
     num_v = s.shape[0]
-    ahead = jnp.mod(s[None, :] - s[:, None], ring)  # [i, j]: how far j is ahead of i
-    behind = jnp.mod(s[:, None] - s[None, :], ring)
+    ahead = _ahead_m(s, ring)  # [i, j]: how far j is ahead of i
+    behind = jnp.where(ahead > 0.0, ring - ahead, 0.0)
     rel = jnp.arange(3) - 1  # right, own, left
-    lane_of_i = state.lane[:, None, None] + rel[None, None, :]  # [i, 1, r]
-    occupies = (state.lane[None, :, None] == lane_of_i) | (state.target_lane[None, :, None] == lane_of_i)
-    occupies &= ~jnp.eye(num_v, dtype=bool)[:, :, None]  # [i, j, r]
+    lane_of_i = state.lane[:, None, None] + rel[None, :, None]  # [i, r, 1]
+    occupies = (state.lane[None, None, :] == lane_of_i) | (state.target_lane[None, None, :] == lane_of_i)
+    occupies &= ~jnp.eye(num_v, dtype=bool)[:, None, :]  # [i, r, j]: the minor axis is reduced
     big = jnp.asarray(jnp.inf, s.dtype)
-    ahead_r = jnp.where(occupies, ahead[:, :, None], big)
-    behind_r = jnp.where(occupies, behind[:, :, None], big)
-    leader = jnp.argmin(ahead_r, axis=1)
-    follower = jnp.argmin(behind_r, axis=1)
-    leader_dist = jnp.min(ahead_r, axis=1)
-    follower_dist = jnp.min(behind_r, axis=1)
-    return leader, leader_dist, jnp.isfinite(leader_dist), follower, follower_dist, jnp.isfinite(follower_dist)
+    ahead_r = jnp.where(occupies, ahead[:, None, :], big)
+    behind_r = jnp.where(occupies, behind[:, None, :], big)
+    leader = jnp.argmin(ahead_r, axis=2)
+    follower = jnp.argmin(behind_r, axis=2)
+    leader_dist = jnp.take_along_axis(ahead_r, leader[:, :, None], axis=2)[:, :, 0]
+    follower_dist = jnp.take_along_axis(behind_r, follower[:, :, None], axis=2)[:, :, 0]
+    return leader, leader_dist, jnp.isfinite(leader_dist), follower, follower_dist, jnp.isfinite(follower_dist), ahead
+
+
+def _ahead_m(s: Float[Array, "V"], ring: Float[Array, ""]) -> Float[Array, "V V"]:
+    """[i, j]: distance from i forward to j along the ring, in [0, ring) [m]."""
+    return jnp.mod(s[None, :] - s[:, None], ring)
 
 
 def _idm_towards(speed, own_len, p: IDMParams, lead_dist, lead_len, lead_speed, has_lead):
@@ -282,7 +287,7 @@ def traffic_step(
     num_v = state.s_m.shape[0]
     v, length = state.speed_mps, vehicles.length_m
     idm = dataclasses.replace(vehicles.idm, desired_speed_mps=state.desired_speed_mps)
-    leader, lead_dist, has_lead, follower, foll_dist, has_foll = _neighbours(state, vehicles)
+    leader, lead_dist, has_lead, follower, foll_dist, has_foll, ahead = _neighbours(state, vehicles)
 
     # Longitudinal: IDM towards the leader of each relative lane; a vehicle obeys every lane it occupies.
     idm_r = jax.tree_util.tree_map(lambda a: a[:, None], idm)
@@ -331,8 +336,8 @@ def traffic_step(
     new_target = jnp.where(starts, state.lane + jnp.where(go_left, 1, -1), state.target_lane)
 
     # Two starters whose lanes would overlap and that are close: only the lower index goes.
-    sep = jnp.mod(state.s_m[None, :] - state.s_m[:, None] + 0.5 * vehicles.ring_length_m, vehicles.ring_length_m)
-    close = jnp.abs(sep - 0.5 * vehicles.ring_length_m) < 0.5 * (length[:, None] + length[None, :]) + lc.conflict_distance_m
+    separation = jnp.minimum(ahead, vehicles.ring_length_m - ahead)
+    close = separation < 0.5 * (length[:, None] + length[None, :]) + lc.conflict_distance_m
     lo_i = jnp.minimum(state.lane, new_target)
     hi_i = jnp.maximum(state.lane, new_target)
     share = (lo_i[:, None] <= hi_i[None, :]) & (lo_i[None, :] <= hi_i[:, None])
