@@ -47,22 +47,25 @@ def bumper_gaps(traj, n):
     return ahead - 0.5 * (length[None, :, None] + length[None, None, :]), ahead
 
 
+def min_gap_sharing_a_lane(traj, n):
+    """Smallest bumper gap [m] over frames between vehicles sharing a lane in simulation n.
+
+    A vehicle changing lanes occupies both: the lane it leaves and the one it enters.
+    """
+    lane, target = traj.lane[n], traj.target_lane[n]
+    share = (
+        (lane[:, :, None] == lane[:, None, :]) | (lane[:, :, None] == target[:, None, :])
+        | (target[:, :, None] == lane[:, None, :]) | (target[:, :, None] == target[:, None, :])
+    )
+    share &= ~np.eye(lane.shape[1], dtype=bool)[None]
+    gap, ahead = bumper_gaps(traj, n)
+    front = share & (ahead <= 0.5 * traj.vehicles.ring_length_m[n])  # each pair once, from behind
+    return np.where(front, gap, np.inf).min()
+
+
 def test_no_collisions_between_vehicles_sharing_a_lane(traffic):
-    occupied = []
-    for n in range(NUM_SIMS):
-        lane, target = traffic.lane[n], traffic.target_lane[n]
-        # A vehicle changing lanes occupies both: the lane it leaves and the one it enters.
-        share = (
-            (lane[:, :, None] == lane[:, None, :]) | (lane[:, :, None] == target[:, None, :])
-            | (target[:, :, None] == lane[:, None, :]) | (target[:, :, None] == target[:, None, :])
-        )
-        share &= ~np.eye(lane.shape[1], dtype=bool)[None]
-        gap, ahead = bumper_gaps(traffic, n)
-        ring = traffic.vehicles.ring_length_m[n]
-        front = share & (ahead <= 0.5 * ring)  # each pair once, from the follower's side
-        occupied.append(np.where(front, gap, np.inf).min())
-    assert min(occupied) > 0.0, f"bumper gaps down to {min(occupied):.3f} m"
-    assert np.isfinite(min(occupied))
+    smallest = min(min_gap_sharing_a_lane(traffic, n) for n in range(NUM_SIMS))
+    assert 0.0 < smallest < np.inf, f"bumper gaps down to {smallest:.3f} m"
 
 
 def test_vehicles_stay_on_the_road(traffic):
@@ -115,6 +118,24 @@ def test_idm_followers_keep_the_minimum_gap_in_steady_state():
         v = traj.speed_mps[n]
         assert np.ptp(v[-1]) < 0.05 and np.abs(v[-1] - v[-10]).max() < 0.01
         assert ring > 0
+
+
+@pytest.mark.slow
+def test_extremes_of_the_config_ranges_stay_finite_and_collision_free():
+    base = TrafficConfig()
+    cfg = replace(
+        base,
+        road=replace(base.road, num_lanes=2, vehicles_per_lane=6),
+        traffic=replace(
+            base.traffic, density_veh_per_km_lane=(150.0, 150.0), desired_speed_mps=(60.0, 60.0),
+            speed_change_rate_per_s=1.0, speed_change_factor=(0.01, 3.0), kind_probabilities=(0.0, 0.0, 1.0),
+        ),
+        lane_change=replace(base.lane_change, duration_s=(0.5, 0.5), cooldown_s=0.0, route_change_rate_per_s=5.0),
+        sampling=replace(base.sampling, warmup_s=2.0, window_s=10.0),
+    )
+    traj = jax.tree_util.tree_map(np.asarray, simulate_batch(cfg, simulation_keys(jax.random.key(5), 0, 4)))
+    assert all(np.isfinite(a).all() for a in jax.tree_util.tree_leaves(traj) if a.dtype.kind == "f")
+    assert min(min_gap_sharing_a_lane(traj, n) for n in range(4)) > 0.0
 
 
 def test_same_key_same_traffic_bit_for_bit(traffic):

@@ -105,7 +105,7 @@ def test_labels_of_the_constructed_scene(constructed):
     ],
 )
 def test_lateral_label_rule(before, now, after, label):
-    assert int(lateral_label(jnp.asarray(before), jnp.asarray(now), jnp.asarray(after))) == label
+    assert int(jax.jit(lateral_label)(jnp.asarray(before), jnp.asarray(now), jnp.asarray(after))) == label
 
 
 @pytest.mark.parametrize(
@@ -118,7 +118,7 @@ def test_lateral_label_rule(before, now, after, label):
     ],
 )
 def test_longitudinal_label_rule(s_before, s_now, s_after, label):
-    got = longitudinal_label(jnp.float32(s_before), jnp.float32(s_now), jnp.float32(s_after))
+    got = jax.jit(longitudinal_label)(jnp.float32(s_before), jnp.float32(s_now), jnp.float32(s_after))
     assert int(got) == label
 
 
