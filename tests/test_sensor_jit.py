@@ -9,6 +9,7 @@ import pytest
 from test_sensor_scenes import traffic_scene
 
 from diffsense import sensor
+from diffsense.errors import InputError
 from diffsense.scene import CAR, TRUCK
 
 KEY = jax.random.key(11, impl="rbg")  # threefry compiles ~3 s slower on CPU
@@ -26,32 +27,51 @@ def test_detect_dispatches_and_agrees_with_the_sensor_functions_under_jit():
     scene = traffic_scene(num_frames=4)
     for config, own_detect, own_p in ((RADAR, sensor.radar_detect, sensor.radar_p_detect),
                                       (CAMERA, sensor.camera_detect, sensor.camera_p_detect)):
-        for mode in ("soft", "hard"):
-            both = jax.jit(lambda s, p, t, config, mode: (
-                sensor.detect(s, p, config, KEY, mode=mode, temperature=t),
-                own_detect(s, p, config, KEY, mode=mode, temperature=t),
-                sensor.p_detect(s, p, config, mode=mode, temperature=t),
-                own_p(s, p, config, mode=mode, temperature=t)), static_argnames=STATIC)
-            det, own, p, p_own = both(scene, config.params, 0.5, config=config, mode=mode)
+        def all_four(s, p, t, config):
+            return [(sensor.detect(s, p, config, KEY, mode=mode, temperature=t),
+                     own_detect(s, p, config, KEY, mode=mode, temperature=t),
+                     sensor.p_detect(s, p, config, mode=mode, temperature=t),
+                     own_p(s, p, config, mode=mode, temperature=t)) for mode in sensor.MODES]
+        results = jax.jit(all_four, static_argnames="config")(scene, config.params, 0.5, config=config)
+        for det, own, p, p_own in results:
             _same(det, own)
             _same(det.p_detect, p)
             _same(p, p_own)
+        soft, hard = (r[2] for r in results)
+        assert set(np.unique(hard)) == {0.0, 1.0}
+        assert np.any((soft > 0) & (soft < 1))
 
 
-def test_detect_batch_is_detect_per_scene_with_folded_keys():
+def test_detect_batch_is_detect_per_scene_with_the_drawn_noise():
     # threefry here: rbg keys do not promise the same draws batched and unbatched
     key = jax.random.key(11)
     one = traffic_scene(num_frames=4)
     scenes = jax.tree.map(lambda a: jnp.stack([a, a]), one)
-    batch = jax.jit(sensor.detect_batch, static_argnames=STATIC)(scenes, RADAR.params, RADAR, key)
+    batch_detect = jax.jit(sensor.detect_batch, static_argnames=STATIC)
+    batch = batch_detect(scenes, RADAR.params, RADAR, key)
     assert batch.p_detect.shape == (2, *one.x_m.shape)
+    noise = jax.jit(sensor.measurement_noise)(key, scenes)
+    assert noise.shape == (2, 2, *one.x_m.shape)
+    _same(batch_detect(scenes, RADAR.params, RADAR, noise), batch)
     single = jax.jit(sensor.detect, static_argnames=STATIC)
     for n in range(2):
-        _same(jax.tree.map(lambda a: a[n], batch),
-              single(one, RADAR.params, RADAR, jax.random.fold_in(key, n)))
-    # different keys per scene: different noise, same probabilities
+        _same(jax.tree.map(lambda a: a[n], batch), single(one, RADAR.params, RADAR, noise[n]))
+    np.testing.assert_array_equal(
+        noise[1], jax.jit(sensor.measurement_noise)(jax.random.fold_in(key, 1), one))
+    # different draws per scene: different noise, same probabilities
     _same(batch.p_detect[0], batch.p_detect[1])
     assert not np.allclose(batch.x_m[0, :, 1:-1], batch.x_m[1, :, 1:-1])
+
+
+def test_noise_and_scene_shapes_are_checked():
+    one = traffic_scene(num_frames=4)
+    with pytest.raises(InputError, match="measurement noise has shape"):
+        sensor.detect(one, RADAR.params, RADAR, jnp.zeros((2, 3, 8)))
+    scenes = jax.tree.map(lambda a: jnp.stack([a, a]), one)
+    with pytest.raises(InputError, match="use detect_batch"):
+        sensor.p_detect(scenes, RADAR.params, RADAR)
+    with pytest.raises(InputError, match="unknown detection mode 'fuzzy'"):
+        sensor.p_detect(one, RADAR.params, RADAR, mode="fuzzy")
 
 
 def test_physics_helpers_under_jit():

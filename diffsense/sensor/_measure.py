@@ -79,9 +79,9 @@ def detect_of(terms, scene: Scene, params, config, key_or_noise: KeyOrNoise, mod
     converted to the world with the ego pose."""
     mode = check_mode(mode)
     tracks = tracks_of(scene)
+    noise = jax.lax.optimization_barrier(jnp.swapaxes(_noise(key_or_noise, scene), -1, -2))
     gates, range_m, azimuth_rad, range_sigma, azimuth_sigma = terms(
         tracks, params, config, mode, temperature)
-    noise = jax.lax.optimization_barrier(jnp.swapaxes(_noise(key_or_noise, scene), -1, -2))
     x, y = to_world(tracks, config.mount_x_m, range_m + range_sigma * noise[0],
                     azimuth_rad + azimuth_sigma * noise[1])
     known = (jnp.arange(x.shape[0]) == EGO_INDEX)[:, None] | ~tracks.present
