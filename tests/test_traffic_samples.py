@@ -19,7 +19,7 @@ from diffsense.scene._idm import IDMParams
 from diffsense.scene._samples import (
     BRAKING, GRID_CELL_M, KEEP, LEFT, NORMAL, RIGHT, extract_samples, lateral_label, longitudinal_label,
 )
-from diffsense.scene._traffic import TrafficTrajectories, TrafficVehicles
+from diffsense.scene._traffic_state import TrafficTrajectories, TrafficVehicles
 from diffsense.scene._traffic_dataset import generate_samples, read_dataset, read_meta, samples_per_simulation
 from test_traffic import CFG, small_config
 

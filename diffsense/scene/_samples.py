@@ -49,7 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from diffsense.scene._traffic import TrafficTrajectories
+from diffsense.scene._traffic_state import TrafficTrajectories
 
 LAYOUT_VERSION = 1
 DOWNSAMPLE = 2  # 10 Hz -> 5 Hz

@@ -38,7 +38,8 @@ from diffsense.scene._samples import (
     extract_samples,
     num_instants,
 )
-from diffsense.scene._traffic import TrafficTrajectories, simulate_traffic
+from diffsense.scene._traffic import simulate_traffic
+from diffsense.scene._traffic_state import TrafficTrajectories
 from diffsense.scene._traffic_config import TrafficConfig
 
 META_FILE = "meta.json"
