@@ -121,6 +121,18 @@ def test_idm_followers_keep_the_minimum_gap_in_steady_state():
 
 
 @pytest.mark.slow
+def test_shipped_config_is_collision_free_and_on_the_road():
+    from diffsense.config import load_default
+
+    cfg = load_default(TrafficConfig, "traffic/default.toml")
+    traj = jax.tree_util.tree_map(np.asarray, simulate_batch(cfg, simulation_keys(jax.random.key(0), 0, 32)))
+    assert min(min_gap_sharing_a_lane(traj, n) for n in range(32)) > 0.0
+    half_w = 0.5 * traj.vehicles.width_m[:, None, :]
+    assert (traj.d_m - half_w >= 0.0).all() and (traj.d_m + half_w <= cfg.road.num_lanes * cfg.road.lane_width_m).all()
+    assert (traj.target_lane != traj.lane).any()  # lane changes happen
+
+
+@pytest.mark.slow
 def test_extremes_of_the_config_ranges_stay_finite_and_collision_free():
     base = TrafficConfig()
     cfg = replace(
