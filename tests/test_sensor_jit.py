@@ -72,6 +72,9 @@ def test_noise_and_scene_shapes_are_checked():
         sensor.p_detect(scenes, RADAR.params, RADAR)
     with pytest.raises(InputError, match="unknown detection mode 'fuzzy'"):
         sensor.p_detect(one, RADAR.params, RADAR, mode="fuzzy")
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="temperature must be a positive number"):
+            sensor.p_detect(one, RADAR.params, RADAR, temperature=bad)
 
 
 def test_physics_helpers_under_jit():

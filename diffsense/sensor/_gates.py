@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Literal
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -45,6 +46,21 @@ def check_mode(mode: str) -> Mode:
     if mode not in MODES:
         raise InputError(f"unknown detection mode {mode!r} (known: soft, hard)")
     return mode  # type: ignore[return-value]
+
+
+def check_temperature(temperature):
+    """Refuse a concrete temperature that is not a positive finite number (traced: unchecked)."""
+    import math
+
+    from diffsense.errors import InputError
+
+    try:
+        value = float(temperature)
+    except (TypeError, ValueError, jax.errors.ConcretizationTypeError):
+        return temperature  # traced, or an array: the caller's (solver's) business
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"temperature must be a positive number, got {value:g}")
+    return temperature
 
 
 def p_from_gates(

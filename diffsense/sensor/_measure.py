@@ -16,7 +16,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from diffsense.errors import InputError
 from diffsense.scene import EGO_INDEX, Scene
 from diffsense.sensor._datatypes import Detections
-from diffsense.sensor._gates import check_mode, p_from_gates
+from diffsense.sensor._gates import check_mode, check_temperature, p_from_gates
 from diffsense.sensor._geometry import Tracks, to_world
 
 KeyOrNoise = PRNGKeyArray | Float[Array, "2 T V"]
@@ -68,6 +68,7 @@ def _transposed(a: Float[Array, "V T"]) -> Float[Array, "T V"]:
 def p_detect_of(terms, scene: Scene, params, config, mode: str, temperature) -> Float[Array, "T V"]:
     """p_detect of a sensor given its `terms` function (gates, range, azimuth, noise scales)."""
     mode = check_mode(mode)
+    check_temperature(temperature)
     tracks = tracks_of(scene)
     gates = terms(tracks, params, config, mode, temperature)[0]
     return own_and_padding(tracks, p_from_gates(gates, mode))
@@ -78,6 +79,7 @@ def detect_of(terms, scene: Scene, params, config, key_or_noise: KeyOrNoise, mod
     """`Detections` of a sensor given its `terms` function: noisy sensor-frame measurements
     converted to the world with the ego pose."""
     mode = check_mode(mode)
+    check_temperature(temperature)
     tracks = tracks_of(scene)
     noise = jax.lax.optimization_barrier(jnp.swapaxes(_noise(key_or_noise, scene), -1, -2))
     gates, range_m, azimuth_rad, range_sigma, azimuth_sigma = terms(
