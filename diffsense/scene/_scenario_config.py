@@ -92,17 +92,23 @@ class LaneChangeSpec:
 
 @dataclasses.dataclass(frozen=True)
 class BackgroundSpec:
-    """Far background traffic: `count` lane-keeping IDM vehicles behind the ego, cycling over
-    every lane. They cannot reach the target's social grid; they exist to show that the cost
-    downstream does not grow with them (see `relevant_vehicles`)."""
+    """Background traffic: `count` IDM vehicles behind the ego, vehicle i in lane i % lanes and
+    row i // lanes, `gap_m` behind the ego and `spacing_m` apart; with `mobil` they change lanes
+    by MOBIL (quintic, `lane_change_duration_s` long). Placed far back, they never reach the
+    target's social grid: they show that the cost downstream does not grow with them."""
 
     count: int = 0
     gap_m: float = 150.0
     spacing_m: float = 40.0
-    relative_speed_kmh: Range = Range(0.0, -5.0, 5.0)
+    relative_speed_kmh: Range = Range(0.0, -10.0, 10.0)
     kind: KindName = "car"
+    mobil: bool = True
+    lane_change_duration_s: float = 4.0
 
     def __post_init__(self):
+        lo, hi = LANE_CHANGE_DURATION_BOUNDS_S
+        if not lo <= self.lane_change_duration_s <= hi:
+            raise InputError(f"background.lane_change_duration_s must lie in [{lo}, {hi}] s, got {self.lane_change_duration_s}")
         if not 0 <= self.count <= 10_000:
             raise InputError(f"background.count must be in [0, 10000], got {self.count}")
         if not (self.gap_m > 0.0 and self.spacing_m > 0.0):
@@ -188,13 +194,24 @@ class DriverModel:
 
 
 @dataclasses.dataclass(frozen=True)
+class LaneChangeModel:
+    """MOBIL parameters of the background vehicles (see diffsense.scene.MOBILParams)."""
+
+    politeness: float
+    threshold_mps2: float
+    safe_decel_mps2: float
+    keep_right_bias_mps2: float
+
+
+@dataclasses.dataclass(frozen=True)
 class VehicleModels:
-    """configs/scenarios/common/vehicles.toml: kinds' sizes and the driver model."""
+    """configs/scenarios/common/vehicles.toml: kinds' sizes, the driver model, MOBIL."""
 
     car: KindModel
     van: KindModel
     truck: KindModel
     driver: DriverModel
+    mobil: LaneChangeModel
 
     def size(self, kind: str) -> KindModel:
         return getattr(self, kind)

@@ -1,7 +1,7 @@
 """Scenario simulation: IDM car following in `lax.scan` at 10 Hz, lane changes by quintic profile.
 
-Lateral motion is planned (a quintic from `VehiclePlan`), so d(t) is known in closed form; the
-longitudinal motion reacts to it. Each frame every vehicle follows the nearest vehicle ahead whose
+Lateral motion follows quintic lane changes: the scenario's are planned (`VehiclePlan`), background
+vehicles may start their own by MOBIL; the longitudinal motion reacts to them. Each frame every vehicle follows the nearest vehicle ahead whose
 body, widened by `lateral_margin_m` on each side, overlaps its own laterally: a follower starts
 reacting to a cut-in while the lane changer is still crossing. Speeds advance by the ballistic
 update of Treiber & Kanagaraj (2015): v' = v + a dt, s' = s + (v + v') dt / 2, stopping at v = 0.
@@ -9,6 +9,7 @@ update of Treiber & Kanagaraj (2015): v' = v + a dt, s' = s + (v + v') dt / 2, s
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import jax
@@ -16,9 +17,11 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from diffsense.errors import InputError
-from diffsense.scene._datatypes import Scene
+from diffsense.scene._background_mobil import lane_change_starts
+from diffsense.scene._datatypes import BACKGROUND, Scene
 from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams, idm_acceleration
 from diffsense.scene._lane_change import quintic_lateral_offset_m, quintic_lateral_speed_mps
+from diffsense.scene._mobil import MOBILParams
 from diffsense.scene._road import Road, curvature_1pm, frenet_to_cartesian, lane_index, load_road
 from diffsense.scene._scenario_config import DriverModel, ScenarioConfig, VehicleModels, load_vehicle_models
 from diffsense.scene._variants import ScenarioNumbers, VehiclePlan, draw_plan, scenario_numbers
@@ -30,10 +33,14 @@ MIN_DESIRED_SPEED_MPS = 1.0  # a floor only: every shipped scenario starts at hi
 def leaders(
     s_m: Float[Array, " V"], d_m: Float[Array, " V"], speed_mps: Float[Array, " V"],
     length_m: Float[Array, " V"], width_m: Float[Array, " V"], lateral_margin_m: float,
+    heading_to_m: Float[Array, " V"] | None = None, lane_width_m: Float[Array, ""] | float = 0.0,
 ) -> tuple[Float[Array, " V"], Float[Array, " V"]]:
     """Bumper-to-bumper gap to each vehicle's leader [m] and the leader's speed [m/s].
 
-    No leader: gap FREE_ROAD_GAP_M and the vehicle's own speed.
+    j leads i when it is ahead and their bodies (widened by the margin) overlap laterally, or when
+    either is changing into the other's lane (`heading_to_m`: the lane centre a vehicle is
+    changing into, its own d when not changing): a lane changer and its new follower react to each
+    other from the start of the change. No leader: gap FREE_ROAD_GAP_M and the own speed.
     """
     v = s_m.shape[-1]
     ahead_m = s_m[None, :] - s_m[:, None]  # [follower, leader]
@@ -41,6 +48,10 @@ def leaders(
     in_front = (ahead_m > 0) | ((ahead_m == 0) & (index[None, :] > index[:, None]))
     overlap_m = 0.5 * (width_m[None, :] + width_m[:, None]) + 2.0 * lateral_margin_m
     same_lane = jnp.abs(d_m[None, :] - d_m[:, None]) < overlap_m
+    if heading_to_m is not None:
+        half_lane = 0.5 * lane_width_m
+        same_lane |= jnp.abs(heading_to_m[None, :] - d_m[:, None]) < half_lane  # j comes into i's lane
+        same_lane |= jnp.abs(d_m[None, :] - heading_to_m[:, None]) < half_lane  # i goes into j's lane
     gap_m = ahead_m - 0.5 * (length_m[None, :] + length_m[:, None])
     gap_m = jnp.where(in_front & same_lane, gap_m, FREE_ROAD_GAP_M)
     nearest = jnp.argmin(gap_m, axis=-1)
@@ -72,26 +83,46 @@ def _idm(plan: VehiclePlan, driver: DriverModel) -> IDMParams:
     )
 
 
-def simulate_plan(plan: VehiclePlan, road: Road, driver: DriverModel, num_frames: int, dt_s: float = SCENE_DT_S) -> Scene:
-    """Simulate one variant for `num_frames` frames [T, V] (frame k is at t = k dt)."""
+def simulate_plan(
+    plan: VehiclePlan, road: Road, driver: DriverModel, num_frames: int, dt_s: float = SCENE_DT_S,
+    mobil: MOBILParams | None = None,
+) -> Scene:
+    """Simulate one variant for `num_frames` frames [T, V] (frame k is at t = k dt).
+
+    With `mobil`, BACKGROUND vehicles also change lanes by MOBIL (see _background_mobil.py);
+    without it every lateral motion is the plan's.
+    """
     dtype = plan.s_m.dtype
     t = jnp.arange(num_frames, dtype=dtype) * dt_s
-    lc = (plan.lc_start_s, plan.lc_duration_s, plan.d_from_m, plan.d_to_m)
-    d = quintic_lateral_offset_m(t[:, None], *lc)
-    d_rate = quintic_lateral_speed_mps(t[:, None], *lc)
     idm = _idm(plan, driver)
+    may_change = plan.role == BACKGROUND
+    lane_width = jnp.asarray(road.lane_width_m, dtype)
 
-    def step(carry, d_now):
-        s, v = carry
-        gap, lead_v = leaders(s, d_now, v, plan.length_m, plan.width_m, driver.lateral_margin_m)
+    def step(carry, t_now):
+        s, v, lc_start, d_from, d_to = carry
+        lc = (lc_start, plan.lc_duration_s, d_from, d_to)
+        d = quintic_lateral_offset_m(t_now, *lc)
+        # MOBIL changers are announced (their new neighbours react from the start); a scripted
+        # cut-in is noticed when the bodies overlap, which keeps the paper's cut-ins as tight.
+        announced = may_change & (t_now >= lc_start) & (t_now < lc_start + plan.lc_duration_s)
+        gap, lead_v = leaders(s, d, v, plan.length_m, plan.width_m, driver.lateral_margin_m,
+                              jnp.where(announced, d_to, d), lane_width)
         a = jnp.maximum(idm_acceleration(v, gap, lead_v, idm), -driver.max_brake_mps2)
+        if mobil is not None:
+            free = may_change & (t_now >= lc_start + plan.lc_duration_s)
+            starts, to = lane_change_starts(s, d, d_to, v, a, plan.length_m, idm, free, lane_width,
+                                            road.num_lanes, mobil)
+            lc_start, d_from, d_to = (jnp.where(starts, t_now, lc_start), jnp.where(starts, d_to, d_from),
+                                      jnp.where(starts, to, d_to))
         v_next = v + a * dt_s
         stops = v_next < 0.0
         stop_m = v**2 / (2.0 * jnp.where(stops, -a, 1.0))  # a < 0 wherever it is used
         s_next = s + jnp.where(stops, stop_m, 0.5 * (v + v_next) * dt_s)
-        return (s_next, jnp.maximum(v_next, 0.0)), (s, v)
+        frame = (s, v, d, quintic_lateral_speed_mps(t_now, *lc))
+        return (s_next, jnp.maximum(v_next, 0.0), lc_start, d_from, d_to), frame
 
-    _, (s, v) = jax.lax.scan(step, (plan.s_m, plan.speed_mps), d)
+    start = (plan.s_m, plan.speed_mps, plan.lc_start_s, plan.d_from_m, plan.d_to_m)
+    _, (s, v, d, d_rate) = jax.lax.scan(step, start, t)
     x, y, road_angle = frenet_to_cartesian(road, s, d)
     along = v * (1.0 - curvature_1pm(road, s) * d)
     still = (jnp.abs(along) + jnp.abs(d_rate)) == 0.0  # atan2(0, 0) has no gradient
@@ -105,13 +136,13 @@ def simulate_plan(plan: VehiclePlan, road: Road, driver: DriverModel, num_frames
 
 @functools.partial(jax.jit, static_argnames=("driver", "num_variants", "num_frames"))
 def simulate_numbers(nums: ScenarioNumbers, road: Road, driver: DriverModel, key: PRNGKeyArray,
-                     num_variants: int, num_frames: int) -> Scene:
+                     num_variants: int, num_frames: int, mobil: MOBILParams | None = None) -> Scene:
     """`simulate_scenario` on a scenario's arrays: one compilation per (variants, frames, vehicles)
     shared by every scenario and road (their values are traced, not baked in)."""
     keys = jax.random.split(key, num_variants)
     nominal = jnp.arange(num_variants) == 0
     plans = jax.vmap(draw_plan, in_axes=(None, 0, 0))(nums, keys, nominal)
-    return jax.vmap(lambda p: simulate_plan(p, road, driver, num_frames))(plans)
+    return jax.vmap(lambda p: simulate_plan(p, road, driver, num_frames, mobil=mobil))(plans)
 
 
 def simulate_scenario(
@@ -136,4 +167,7 @@ def simulate_scenario(
         key = jax.random.key(key)
     num_frames = round(cfg.duration_s / SCENE_DT_S) + 1
     nums = scenario_numbers(cfg, models, road, dtype)
-    return simulate_numbers(nums, road, models.driver, key, num_variants, num_frames)
+    mobil = None
+    if cfg.background.count and cfg.background.mobil:
+        mobil = MOBILParams(**{k: jnp.asarray(x, dtype) for k, x in dataclasses.asdict(models.mobil).items()})
+    return simulate_numbers(nums, road, models.driver, key, num_variants, num_frames, mobil)

@@ -19,8 +19,8 @@ from diffsense.scene._road import Road, lane_centre_d_m
 from diffsense.scene._scenario_config import ScenarioConfig, VehicleModels
 
 _KMH = 1.0 / 3.6
-# A vehicle without a lane change gets one that starts long after any scene ends.
-NO_LANE_CHANGE_S = 1e6
+# A vehicle without a lane change gets one (from its lane to the same lane) that ended long ago.
+NO_LANE_CHANGE_S = -1e6
 NUM_ROLES = 5  # ego, target, lead, target lead, adjacent
 
 
@@ -75,6 +75,7 @@ class ScenarioNumbers:
         background_d_m: [B] lane centre of each background vehicle [m].
         background_row: [B] its row behind the ego [-].
         background_kind: [] its kind id.
+        background_lane_change_s: [] duration of a background vehicle's (MOBIL) lane change [s].
     """
 
     ego_s_m: Float[Array, " 3"]
@@ -95,6 +96,7 @@ class ScenarioNumbers:
     background_d_m: Float[Array, " B"]
     background_row: Float[Array, " B"]
     background_kind: Int[Array, ""]
+    background_lane_change_s: Float[Array, ""]
 
 
 def scenario_numbers(cfg: ScenarioConfig, models: VehicleModels, road: Road, dtype=jnp.float32) -> ScenarioNumbers:
@@ -121,6 +123,7 @@ def scenario_numbers(cfg: ScenarioConfig, models: VehicleModels, road: Road, dty
         background_gap_m=f(bg.gap_m), background_spacing_m=f(bg.spacing_m),
         background_d_m=f(lane_centre_d_m(road, i % lanes_here)), background_row=f(i // lanes_here),
         background_kind=jnp.asarray(KIND_NAMES.index(bg.kind), jnp.int32),
+        background_lane_change_s=f(bg.lane_change_duration_s),
     )
 
 
@@ -165,7 +168,7 @@ def _background(nums: ScenarioNumbers, key, nominal, ego_rear_s, ego_v) -> Vehic
     rel = _draw(key, jnp.broadcast_to(nums.background_speed_mps, (count, 3)), nominal)
     full = lambda value, dt=dtype: jnp.full((count,), value, dt)  # noqa: E731
     return VehiclePlan(s, ego_v + rel, nums.background_d_m, nums.background_d_m, full(NO_LANE_CHANGE_S),
-                       full(1.0), full(length), full(nums.width_of[kind]), full(kind, jnp.int32),
+                       full(nums.background_lane_change_s), full(length), full(nums.width_of[kind]), full(kind, jnp.int32),
                        full(BACKGROUND, jnp.int32))
 
 
