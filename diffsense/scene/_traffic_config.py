@@ -31,7 +31,7 @@ def _check_positive(where: str, value: float) -> None:
 
 
 @dataclasses.dataclass(frozen=True)
-class RoadConfig:
+class RingRoadConfig:
     """A straight multi-lane road closed into a ring, so that density stays constant.
 
     Attributes:
@@ -202,7 +202,7 @@ def _is_multiple(x: float, step: float) -> bool:
 class TrafficConfig:
     """Everything the training-traffic generator needs (see configs/traffic/default.toml)."""
 
-    road: RoadConfig = RoadConfig()
+    road: RingRoadConfig = RingRoadConfig()
     traffic: TrafficRanges = TrafficRanges()
     car: KindConfig = KindConfig()
     van: KindConfig = KindConfig(length_m=(5.0, 6.0), width_m=(1.9, 2.1), max_accel_mps2=(0.8, 1.4))
