@@ -137,7 +137,7 @@ def test_extremes_of_the_config_ranges_stay_finite_and_collision_free():
     base = TrafficConfig()
     cfg = replace(
         base,
-        road=replace(base.road, num_lanes=2, vehicles_per_lane=6),
+        road=replace(base.road, num_lanes=2, vehicles_per_lane=9),
         traffic=replace(
             base.traffic, density_veh_per_km_lane=(150.0, 150.0), desired_speed_mps=(60.0, 60.0),
             speed_change_rate_per_s=1.0, speed_change_factor=(0.01, 3.0), kind_probabilities=(0.0, 0.0, 1.0),
@@ -147,6 +147,7 @@ def test_extremes_of_the_config_ranges_stay_finite_and_collision_free():
     )
     traj = jax.tree_util.tree_map(np.asarray, simulate_batch(cfg, simulation_keys(jax.random.key(5), 0, 4)))
     assert all(np.isfinite(a).all() for a in jax.tree_util.tree_leaves(traj) if a.dtype.kind == "f")
+    assert (traj.vehicles.ring_length_m >= 60.0).all()
     assert min(min_gap_sharing_a_lane(traj, n) for n in range(4)) > 0.0
 
 
@@ -173,6 +174,7 @@ def test_simulation_is_float32_and_finite(traffic):
         ("road", {"num_lanes": 0}, "road.num_lanes"),
         ("lane_change", {"duration_s": (0.0, 4.0)}, "lane_change.duration_s"),
         ("sampling", {"instant_every_s": 0.3}, "instant_every_s"),
+        ("road", {"vehicles_per_lane": 3}, "ring"),
     ],
 )
 def test_bad_config_values_name_the_key(section, changes, needle):

@@ -13,6 +13,9 @@ import math
 from diffsense.errors import InputError
 
 Interval = tuple[float, float]
+# Shortest ring road: twice the social grid's reach (2 x 90 ft = 54.9 m) and a margin, so that no
+# vehicle is ever within the grid both ahead and behind.
+MIN_RING_M = 60.0
 
 
 def _check_interval(where: str, value: Interval, lo: float = -math.inf, hi: float = math.inf, positive: bool = False) -> None:
@@ -216,6 +219,13 @@ class TrafficConfig:
     def __post_init__(self):
         for name in ("car", "van", "truck"):
             getattr(self, name).check(name, self.road.lane_width_m)
+        shortest = self.road.vehicles_per_lane * 1000.0 / self.traffic.density_veh_per_km_lane[1]
+        if shortest < MIN_RING_M:
+            raise InputError(
+                f"road.vehicles_per_lane: {self.road.vehicles_per_lane} vehicles at "
+                f"{self.traffic.density_veh_per_km_lane[1]} veh/km make a {shortest:.0f} m ring, shorter than "
+                f"{MIN_RING_M:.0f} m (the social grid would see a vehicle around the ring): add vehicles"
+            )
 
     @property
     def kinds(self) -> tuple[KindConfig, KindConfig, KindConfig]:
