@@ -201,6 +201,11 @@ class LaneChangeModel:
     threshold_mps2: float
     safe_decel_mps2: float
     keep_right_bias_mps2: float
+    decision_period_s: float
+
+    def __post_init__(self):
+        if not 0.1 <= self.decision_period_s <= 10.0:
+            raise InputError(f"mobil.decision_period_s must be in [0.1, 10] s, got {self.decision_period_s}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -85,12 +85,12 @@ def _idm(plan: VehiclePlan, driver: DriverModel) -> IDMParams:
 
 def simulate_plan(
     plan: VehiclePlan, road: Road, driver: DriverModel, num_frames: int, dt_s: float = SCENE_DT_S,
-    mobil: MOBILParams | None = None,
+    mobil: MOBILParams | None = None, mobil_period_frames: int = 10,
 ) -> Scene:
     """Simulate one variant for `num_frames` frames [T, V] (frame k is at t = k dt).
 
-    With `mobil`, BACKGROUND vehicles also change lanes by MOBIL (see _background_mobil.py);
-    without it every lateral motion is the plan's.
+    With `mobil`, BACKGROUND vehicles also change lanes by MOBIL (see _background_mobil.py),
+    deciding every `mobil_period_frames` frames; without it every lateral motion is the plan's.
     """
     dtype = plan.s_m.dtype
     t = jnp.arange(num_frames, dtype=dtype) * dt_s
@@ -98,7 +98,14 @@ def simulate_plan(
     may_change = plan.role == BACKGROUND
     lane_width = jnp.asarray(road.lane_width_m, dtype)
 
-    def step(carry, t_now):
+    def decide(s, d, d_to, v, a, lc_start, d_from, t_now):
+        free = may_change & (t_now >= lc_start + plan.lc_duration_s)
+        starts, to = lane_change_starts(s, d, d_to, v, a, plan.length_m, idm, free, lane_width,
+                                        road.num_lanes, mobil)
+        return jnp.where(starts, t_now, lc_start), jnp.where(starts, d_to, d_from), jnp.where(starts, to, d_to)
+
+    def step(carry, frame):
+        k, t_now = frame
         s, v, lc_start, d_from, d_to = carry
         lc = (lc_start, plan.lc_duration_s, d_from, d_to)
         d = quintic_lateral_offset_m(t_now, *lc)
@@ -108,12 +115,10 @@ def simulate_plan(
         gap, lead_v = leaders(s, d, v, plan.length_m, plan.width_m, driver.lateral_margin_m,
                               jnp.where(announced, d_to, d), lane_width)
         a = jnp.maximum(idm_acceleration(v, gap, lead_v, idm), -driver.max_brake_mps2)
-        if mobil is not None:
-            free = may_change & (t_now >= lc_start + plan.lc_duration_s)
-            starts, to = lane_change_starts(s, d, d_to, v, a, plan.length_m, idm, free, lane_width,
-                                            road.num_lanes, mobil)
-            lc_start, d_from, d_to = (jnp.where(starts, t_now, lc_start), jnp.where(starts, d_to, d_from),
-                                      jnp.where(starts, to, d_to))
+        if mobil is not None:  # k is the same in every vmapped variant: a real branch, not a select
+            lc_start, d_from, d_to = jax.lax.cond(
+                k % mobil_period_frames == 0, decide, lambda *args: (args[5], args[6], args[2]),
+                s, d, d_to, v, a, lc_start, d_from, t_now)
         v_next = v + a * dt_s
         stops = v_next < 0.0
         stop_m = v**2 / (2.0 * jnp.where(stops, -a, 1.0))  # a < 0 wherever it is used
@@ -122,7 +127,7 @@ def simulate_plan(
         return (s_next, jnp.maximum(v_next, 0.0), lc_start, d_from, d_to), frame
 
     start = (plan.s_m, plan.speed_mps, plan.lc_start_s, plan.d_from_m, plan.d_to_m)
-    _, (s, v, d, d_rate) = jax.lax.scan(step, start, t)
+    _, (s, v, d, d_rate) = jax.lax.scan(step, start, (jnp.arange(num_frames), t))
     x, y, road_angle = frenet_to_cartesian(road, s, d)
     along = v * (1.0 - curvature_1pm(road, s) * d)
     still = (jnp.abs(along) + jnp.abs(d_rate)) == 0.0  # atan2(0, 0) has no gradient
@@ -134,15 +139,17 @@ def simulate_plan(
     )
 
 
-@functools.partial(jax.jit, static_argnames=("driver", "num_variants", "num_frames"))
+@functools.partial(jax.jit, static_argnames=("driver", "num_variants", "num_frames", "mobil_period_frames"))
 def simulate_numbers(nums: ScenarioNumbers, road: Road, driver: DriverModel, key: PRNGKeyArray,
-                     num_variants: int, num_frames: int, mobil: MOBILParams | None = None) -> Scene:
+                     num_variants: int, num_frames: int, mobil: MOBILParams | None = None,
+                     mobil_period_frames: int = 10) -> Scene:
     """`simulate_scenario` on a scenario's arrays: one compilation per (variants, frames, vehicles)
     shared by every scenario and road (their values are traced, not baked in)."""
     keys = jax.random.split(key, num_variants)
     nominal = jnp.arange(num_variants) == 0
     plans = jax.vmap(draw_plan, in_axes=(None, 0, 0))(nums, keys, nominal)
-    return jax.vmap(lambda p: simulate_plan(p, road, driver, num_frames, mobil=mobil))(plans)
+    return jax.vmap(lambda p: simulate_plan(p, road, driver, num_frames, mobil=mobil,
+                                            mobil_period_frames=mobil_period_frames))(plans)
 
 
 def simulate_scenario(
@@ -169,5 +176,8 @@ def simulate_scenario(
     nums = scenario_numbers(cfg, models, road, dtype)
     mobil = None
     if cfg.background.count and cfg.background.mobil:
-        mobil = MOBILParams(**{k: jnp.asarray(x, dtype) for k, x in dataclasses.asdict(models.mobil).items()})
-    return simulate_numbers(nums, road, models.driver, key, num_variants, num_frames, mobil)
+        values = dataclasses.asdict(models.mobil)
+        period = max(1, round(values.pop("decision_period_s") / SCENE_DT_S))
+        mobil = MOBILParams(**{k: jnp.asarray(x, dtype) for k, x in values.items()})
+        return simulate_numbers(nums, road, models.driver, key, num_variants, num_frames, mobil, period)
+    return simulate_numbers(nums, road, models.driver, key, num_variants, num_frames)
