@@ -4,11 +4,11 @@
 
 For each sensor it times one jitted call over all 6 x N scenes (10 Hz, 20 s): soft p_detect and
 noisy measurements (value), and the same with the gradient with respect to every sensor
-parameter (value + grad); wall time (median, best) and the process CPU time per call (a
-machine shared with other jobs inflates the wall time; the CPU time is what the call costs); with the noise drawn inside the call from a key ("key") and with the
-common random numbers drawn once beforehand ("drawn", `sensor.measurement_noise`), as a loop
-over r would. Compile time is reported apart from the per-call time (median and
-best of `--repeats` calls after compilation). Target: < 50 ms per call after compilation.
+parameter (value + grad). The measurement noise is either drawn inside the call from a key
+("key") or drawn once beforehand ("drawn", `sensor.measurement_noise`), as a loop over r would.
+Reported: compile time apart; per call after compilation the wall time (median and best of
+`--repeats`) and the process CPU time (median; on a machine shared with other jobs the wall
+time is inflated, the CPU time is what the call costs). Target: < 50 ms per call.
 Scenes come from the scene engine (diffsense.scene), reduced to their relevant vehicles;
 `--synthetic` uses straight-road scenes of 8 vehicles instead.
 """
@@ -112,7 +112,8 @@ def main() -> None:
           f"({'synthetic' if args.synthetic else 'scene engine'}, built in {build_s:.1f} s)")
     keys = [jax.random.fold_in(jax.random.key(0), i) for i in range(len(scenes))]
     drawn = [sensor.measurement_noise(k, s) for k, s in zip(keys, scenes)]
-    header = f"{'sensor':<8}{'noise':<8}{'call':<14}{'compile [s]':>12}{'median [ms]':>13}{'best [ms]':>11}{'cpu [ms]':>10}  target < {TARGET_MS:g} ms"
+    header = (f"{'sensor':<8}{'noise':<8}{'call':<14}{'compile [s]':>12}{'median [ms]':>13}"
+              f"{'best [ms]':>11}{'cpu [ms]':>10}  target < {TARGET_MS:g} ms")
     print(header)
     print("-" * len(header))
     for name in sensor.SENSORS:

@@ -110,11 +110,11 @@ def _value_and_grad(scene, config, mode):
 @functools.partial(jax.jit, static_argnames="config")
 def _at_extremes(params, temps, scene, config):
     """Soft value, detections and gradients on the extreme scene and on the empty scene (ego
-    only), and the hard detections on the extreme scene, for every parameter set."""
+    only), and the hard p_detect on the extreme scene, for every parameter set."""
     empty = jax.tree.map(lambda a: a[..., :1], scene)
+    hard = jax.vmap(lambda p: sensor.p_detect(scene, p, config, mode="hard"))(params)
     return (_value_and_grad(scene, config, "soft")(params, temps),
-            _value_and_grad(empty, config, "soft")(params, temps),
-            _value_and_grad(scene, config, "hard")(params, temps)[1])
+            _value_and_grad(empty, config, "soft")(params, temps), hard)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -128,11 +128,10 @@ def test_values_and_gradients_are_finite_at_the_extremes(name, dtype):
     for leaf in jax.tree.leaves((soft, empty, hard)):
         assert leaf.dtype == dtype
         assert np.all(np.isfinite(np.asarray(leaf))), name
-    for det in (soft[1], empty[1], hard):
-        p = np.asarray(det.p_detect)
-        assert np.all((p >= 0) & (p <= 1))
+    for p in (soft[1].p_detect, empty[1].p_detect, hard):
+        assert np.all((np.asarray(p) >= 0) & (np.asarray(p) <= 1))
     np.testing.assert_array_equal(empty[1].p_detect, 1.0)  # the ego alone
-    hard_p = np.asarray(hard.p_detect)
+    hard_p = np.asarray(hard)
     assert set(np.unique(hard_p)) <= {0.0, 1.0}
     narrower = raw["hfov_deg"] < 360.0  # only a full circle sees straight behind
     assert np.all(hard_p[narrower][:, :, 4] == 0)  # behind both sensors

@@ -43,6 +43,7 @@ __all__ = [
     "MODES", "SENSORS", "CameraConfig", "CameraParams", "CameraTemperatures", "Detections",
     "ParamSpec", "RadarConfig", "RadarParams", "RadarTemperatures", "camera_depth_sigma_m",
     "camera_detect", "camera_p_detect", "camera_px_per_rad", "check_params", "detect",
-    "detect_batch", "load_config", "make_params", "measurement_noise", "p_detect", "param_specs", "radar_detect",
+    "detect_batch", "load_config", "make_params", "measurement_noise", "p_detect", "param_specs",
+    "radar_detect",
     "radar_gain_dbi", "radar_p_detect", "radar_rcs_dbsm", "radar_snr_db", "with_param",
 ]

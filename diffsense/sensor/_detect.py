@@ -38,7 +38,8 @@ def detect(
     `mode` "soft" gives detection probabilities differentiable in every parameter; "hard" the
     0/1 detections. `key` fixes the measurement-noise draws (common random numbers across
     parameters); it may instead be the draws themselves, [2, T, V] from
-    `measurement_noise(key, scene)`, to draw once outside a loop over parameters. `temperature` scales all soft-gate temperatures of `config`.
+    `measurement_noise(key, scene)`, to draw once outside a loop over parameters.
+    `temperature` scales all soft-gate temperatures of `config`.
     """
     sensor_detect, _ = _pick(params, config)
     return sensor_detect(scene, params, config, key, mode=mode, temperature=temperature)
