@@ -20,6 +20,7 @@ from diffsense.predict import (
     predict_model_frame,
     read_state_dict,
     reference_to_compact,
+    select_mean,
     si_to_model,
     state_dict_from_model,
 )
@@ -126,6 +127,16 @@ def test_dense_equals_compact(predictors, maneuvers):
     np.testing.assert_allclose(compact, dense, rtol=1e-12, atol=1e-12)
 
 
+def test_most_probable_mean_is_the_reference_pick_of_all_six(predictors):
+    # predict_mean decodes only the chosen manoeuvre; the reference decodes 6 and picks one.
+    hist, nbr_hist, slot, weight = _si_batch(12)
+    pred = _forward(predictors[True], si_to_model(hist), si_to_model(nbr_hist), slot, weight)
+    picked = model_to_si(select_mean(pred, "most_probable"))
+    mean = _mean(predictors[True], hist, nbr_hist, slot, weight, mode="most_probable")
+    np.testing.assert_allclose(mean, picked, rtol=1e-12, atol=1e-12)
+    assert not np.allclose(mean, model_to_si(select_mean(pred, "weighted")))
+
+
 def test_occupancy_zero_is_an_absent_neighbour_exactly(predictors):
     predictor = predictors[True]
     hist, nbr_hist, slot, weight = _si_batch(4)
@@ -227,3 +238,29 @@ def test_small_public_functions_under_jit_equal_eager():
     ]
     for fn, args in cases:
         np.testing.assert_allclose(jax.jit(fn)(*args), fn(*args), rtol=1e-12, atol=1e-12)
+
+
+def test_lstm_hand_written_backward_matches_autodiff():
+    from diffsense.predict._layers import lstm_scan
+
+    def plain(xw, w_hh):  # the textbook LSTM with logistic gates, differentiated by JAX
+        hidden = w_hh.shape[0]
+
+        def step(carry, x):
+            h, c = carry
+            i, f, g, o = jnp.split(x + h @ w_hh, 4, axis=-1)
+            c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
+            h = jax.nn.sigmoid(o) * jnp.tanh(c)
+            return (h, c), h
+
+        zeros = jnp.zeros((xw.shape[1], hidden))
+        return jax.lax.scan(step, (zeros, zeros), xw)[1]
+
+    rng = np.random.default_rng(13)
+    xw, w_hh = rng.normal(size=(5, 3, 16)), rng.normal(size=(4, 16))
+    probe = rng.normal(size=(5, 3, 4))
+    np.testing.assert_allclose(lstm_scan(xw, w_hh), plain(xw, w_hh), rtol=1e-13, atol=1e-14)
+    got = jax.grad(lambda a, b: jnp.sum(probe * lstm_scan(a, b)), argnums=(0, 1))(xw, w_hh)
+    want = jax.grad(lambda a, b: jnp.sum(probe * plain(a, b)), argnums=(0, 1))(xw, w_hh)
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-13)

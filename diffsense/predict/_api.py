@@ -116,8 +116,8 @@ def predict_mean(
 ) -> Float[Array, "B 25 2"]:
     """Future mean [B, 25, 2] in SI from compact neighbours (only the N listed are encoded)."""
     model = predictor.model(hist_m.dtype)
-    pred = model.compact(si_to_model(hist_m), si_to_model(nbr_hist_m), nbr_slot, nbr_weight)
-    return model_to_si(select_mean(pred, mode))
+    enc = model.context_compact(si_to_model(hist_m), si_to_model(nbr_hist_m), nbr_slot, nbr_weight)
+    return model_to_si(model.mean_from_context(enc, mode))
 
 
 def predict_mean_dense(
@@ -129,5 +129,5 @@ def predict_mean_dense(
 ) -> Float[Array, "B 25 2"]:
     """Future mean [B, 25, 2] in SI from the dense grid (all 39 slots encoded)."""
     model = predictor.model(hist_m.dtype)
-    pred = model(si_to_model(hist_m), si_to_model(nbrs_m), occupancy.astype(hist_m.dtype))
-    return model_to_si(select_mean(pred, mode))
+    enc = model.context_dense(si_to_model(hist_m), si_to_model(nbrs_m), occupancy.astype(hist_m.dtype))
+    return model_to_si(model.mean_from_context(enc, mode))

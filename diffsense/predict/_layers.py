@@ -56,21 +56,73 @@ class LSTM(nnx.Module):
 
     def scan(self, xw: Float[Array, "T N 4H"]) -> Float[Array, "T N H"]:
         """Hidden states of all steps given the projected inputs (time-major)."""
-        w_hh = self.w_hh[...]
-        hidden = self.hidden
+        return lstm_scan(xw, self.w_hh[...])
 
-        def step(carry, xw_t):
-            h, c = carry
-            gates = xw_t + h @ w_hh
-            i, f, g, o = (gates[..., k * hidden : (k + 1) * hidden] for k in range(4))
-            c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
-            h = jax.nn.sigmoid(o) * jnp.tanh(c)
-            return (h, c), h
+    def final(self, xw: Float[Array, "T N 4H"]) -> Float[Array, "N H"]:
+        """The last hidden state."""
+        return lstm_scan(xw, self.w_hh[...])[-1]
 
-        zeros = jnp.zeros(xw.shape[1:-1] + (hidden,), xw.dtype)
-        # Not unrolled: measured on this CPU, unrolling made compiles 4-13x slower and runs slower.
-        _, hs = jax.lax.scan(step, (zeros, zeros), xw)
-        return hs
+
+def _gate_scale(hidden: int, dtype) -> jax.Array:
+    # sigmoid(x) = (1 + tanh(x / 2)) / 2: one tanh over all four gates per step instead of three
+    # logistics and a tanh (measured 2-3x faster on this CPU; the same value up to rounding).
+    half = jnp.full((hidden,), 0.5, dtype)
+    return jnp.concatenate([half, half, jnp.ones((hidden,), dtype), half])
+
+
+def _forward(xw, w_hh):
+    hidden = w_hh.shape[0]
+    scale = _gate_scale(hidden, xw.dtype)
+
+    def step(carry, xw_t):
+        h, c = carry
+        t = jnp.tanh((xw_t + h @ w_hh) * scale)  # tanh of (i/2, f/2, g, o/2)
+        i, f, g, o = (t[..., k * hidden : (k + 1) * hidden] for k in range(4))
+        c_new = (0.5 + 0.5 * f) * c + (0.5 + 0.5 * i) * g
+        h_new = (0.5 + 0.5 * o) * jnp.tanh(c_new)
+        return (h_new, c_new), (h_new, t, c)
+
+    zeros = jnp.zeros(xw.shape[1:-1] + (hidden,), xw.dtype)
+    # Not unrolled: measured on this CPU, unrolling made compiles 4-13x slower, runs no faster.
+    (_, c_last), (hs, ts, cs_prev) = jax.lax.scan(step, (zeros, zeros), xw)
+    return hs, (ts, cs_prev, c_last, hs, w_hh)
+
+
+@jax.custom_vjp
+def lstm_scan(xw: Float[Array, "T N 4H"], w_hh: Float[Array, "H 4H"]) -> Float[Array, "T N H"]:
+    """One-layer LSTM over time-major projected inputs xw = x @ w_ih + b_ih + b_hh, zero initial
+    state; all hidden states. Hand-written backward (back-propagation through time): the
+    recurrent step does one [N, 4H] x [4H, H] matmul and the weight gradient is one matmul over
+    all steps afterwards (measured 1.3-2x faster than differentiating the scan)."""
+    return _forward(xw, w_hh)[0]
+
+
+def _backward(saved, dhs):
+    ts, cs_prev, c_last, hs, w_hh = saved
+    hidden = w_hh.shape[0]
+    cs = jnp.concatenate([cs_prev[1:], c_last[None]], axis=0)
+    hs_prev = jnp.concatenate([jnp.zeros_like(hs[:1]), hs[:-1]], axis=0)
+
+    def step(carry, xs):
+        dh_next, dc_next = carry
+        dh_t, t, c_prev, c = xs
+        ti, tf, tg, to = (t[..., k * hidden : (k + 1) * hidden] for k in range(4))
+        i, f, o = 0.5 + 0.5 * ti, 0.5 + 0.5 * tf, 0.5 + 0.5 * to
+        dh = dh_next + dh_t
+        tc = jnp.tanh(c)
+        dc = dc_next + dh * o * (1.0 - tc * tc)
+        dgates = jnp.concatenate(
+            [dc * tg * i * (1.0 - i), dc * c_prev * f * (1.0 - f), dc * i * (1.0 - tg * tg), dh * tc * o * (1.0 - o)],
+            axis=-1,
+        )
+        return (dgates @ w_hh.T, dc * f), dgates
+
+    zeros = jnp.zeros_like(dhs[0])
+    _, dgates = jax.lax.scan(step, (zeros, zeros), (dhs, ts, cs_prev, cs), reverse=True)
+    return dgates, jnp.einsum("tnh,tng->hg", hs_prev, dgates)
+
+
+lstm_scan.defvjp(_forward, _backward)
 
 
 class FullWidthConv(nnx.Module):

@@ -93,7 +93,7 @@ class CSLSTM(nnx.Module):
         lead = xy.shape[:-2]
         seq = jnp.moveaxis(xy.reshape((-1, HIST_LEN, 2)), 1, 0)  # [T, N, 2]
         xw = self.enc_lstm.project(leaky_relu(self.ip_emb(seq)))
-        return self.enc_lstm.scan(xw)[-1].reshape(lead + (ENC_SIZE,))
+        return self.enc_lstm.final(xw).reshape(lead + (ENC_SIZE,))
 
     def social(self, grid: Float[Array, "B 39 64"]) -> Float[Array, "B 80"]:
         """Convolutional social pooling of the filled grid (flattened channel-major like torch)."""
@@ -141,6 +141,26 @@ class CSLSTM(nnx.Module):
         mode_prob = (lon_prob[:, :, None] * lat_prob[:, None, :]).reshape(b, N_MODES)
         return Prediction(output_activation(raw), mode_prob, lat_prob, lon_prob)
 
+    def mean_from_context(self, enc: Float[Array, "B 112"], mode: str = "most_probable") -> Float[Array, "B 25 2"]:
+        """The mean trajectory (model frame) without decoding modes nobody asked for.
+
+        Single-mode: the one trajectory. Manoeuvre, "most_probable": the reference evaluation's
+        choice (argmax of the lateral and of the longitudinal probabilities), decoded alone with
+        its one-hots, which is the same as decoding all 6 and picking one. "weighted": the
+        probability-weighted mean of all 6.
+        """
+        if not self.maneuvers:
+            return self.decode_raw(enc)[..., :2]
+        if mode == "weighted":
+            pred = self.heads(enc)
+            return jnp.einsum("bk,bktc->btc", pred.mode_prob, pred.fut[..., :2])
+        if mode != "most_probable":
+            raise ValueError(f"mode must be 'most_probable' or 'weighted', got {mode!r}")
+        lat = jnp.argmax(jax.nn.softmax(self.op_lat(enc), axis=-1), axis=-1)
+        lon = jnp.argmax(jax.nn.softmax(self.op_lon(enc), axis=-1), axis=-1)
+        onehots = [jax.nn.one_hot(lat, N_LAT, dtype=enc.dtype), jax.nn.one_hot(lon, N_LON, dtype=enc.dtype)]
+        return self.decode_raw(jnp.concatenate([enc, *onehots], axis=-1))[..., :2]
+
     # -- the two entry points ---------------------------------------------------------------------
     def __call__(
         self,
@@ -149,10 +169,19 @@ class CSLSTM(nnx.Module):
         occupancy: Float[Array, "B 39"],
     ) -> Prediction:
         """Dense input: every grid slot has a history; occupancy in [0, 1] scales its encoding."""
+        return self.heads(self.context_dense(hist, nbrs, occupancy))
+
+    def context_dense(
+        self,
+        hist: Float[Array, "B 16 2"],
+        nbrs: Float[Array, "B 39 16 2"],
+        occupancy: Float[Array, "B 39"],
+    ) -> Float[Array, "B 112"]:
+        """The decoder context from dense input (see `__call__`)."""
         b = hist.shape[0]
         enc = self.encode_tracks(jnp.concatenate([hist[:, None], nbrs], axis=1))
         grid = occupancy[..., None] * enc[:, 1:]
-        return self.heads(self.context(enc[:, 0], grid.reshape(b, N_SLOTS, ENC_SIZE)))
+        return self.context(enc[:, 0], grid.reshape(b, N_SLOTS, ENC_SIZE))
 
     def compact(
         self,

@@ -10,25 +10,15 @@ and weight 0.
 from __future__ import annotations
 
 import dataclasses
-import json
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from diffsense.errors import InputError
-from diffsense.predict import FUT_LEN, HIST_LEN, N_SLOTS, si_to_model
+from diffsense.predict import HIST_LEN, si_to_model
 
-_SHAPES = {
-    "hist": (HIST_LEN, 2),
-    "fut": (FUT_LEN, 2),
-    "nbr_hist": (HIST_LEN, 2),
-    "nbr_sample": (),
-    "nbr_slot": (),
-    "lat_label": (),
-    "lon_label": (),
-    "sim_id": (),
-}
+# The layout's owner reads and checks shards (shapes, dtypes, finiteness, index ranges).
+from diffsense.scene._traffic_dataset import read_meta, read_shard
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,55 +48,14 @@ class Samples:
         return Samples(**{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)})
 
 
-def _read_shard(path: Path) -> dict[str, np.ndarray]:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            shard = {k: z[k] for k in _SHAPES}
-    except FileNotFoundError:
-        raise InputError(f"missing shard {path}") from None
-    except KeyError as e:
-        raise InputError(f"shard {path} lacks array {e}") from None
-    except (OSError, ValueError, zipfile.BadZipFile) as e:
-        raise InputError(f"cannot read shard {path}: {e}") from None
-    s, m = len(shard["hist"]), len(shard["nbr_hist"])
-    for key, tail in _SHAPES.items():
-        rows = m if key.startswith("nbr_") else s
-        if shard[key].shape != (rows,) + tail:
-            raise InputError(f"shard {path}: {key} has shape {shard[key].shape}, expected {(rows,) + tail}")
-    for key in ("hist", "fut", "nbr_hist"):
-        if not np.all(np.isfinite(shard[key])):
-            raise InputError(f"shard {path}: {key} holds NaN or inf")
-    if m and (shard["nbr_sample"].min() < 0 or shard["nbr_sample"].max() >= s or np.any(np.diff(shard["nbr_sample"]) < 0)):
-        raise InputError(f"shard {path}: nbr_sample must be non-decreasing rows 0..{s - 1}")
-    if m and (shard["nbr_slot"].min() < 0 or shard["nbr_slot"].max() >= N_SLOTS):
-        raise InputError(f"shard {path}: nbr_slot must be grid ids 0..{N_SLOTS - 1}")
-    if s and (shard["lat_label"].min() < 0 or shard["lat_label"].max() > 2 or shard["lon_label"].min() < 0 or shard["lon_label"].max() > 1):
-        raise InputError(f"shard {path}: labels out of range (lat 0..2, lon 0..1)")
-    return shard
-
-
-def read_meta(folder: str | Path) -> dict:
-    """The dataset's meta.json (InputError if the folder is not a dataset)."""
-    path = Path(folder) / "meta.json"
-    try:
-        meta = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{folder} is not a traffic dataset (no meta.json); create one with `python -m diffsense.scene generate --out {folder}`") from None
-    except (OSError, ValueError) as e:
-        raise InputError(f"cannot read {path}: {e}") from None
-    if not isinstance(meta, dict) or not isinstance(meta.get("shards"), list):
-        raise InputError(f"{path}: no list of shards")
-    return meta
-
-
 def load_samples(folder: str | Path, max_samples: int = 0) -> tuple[Samples, dict]:
     """All samples of the dataset (the first `max_samples` if > 0), and its meta.json."""
     meta = read_meta(folder)
     parts, total = [], 0
-    for entry in meta["shards"]:
+    for entry in meta.get("shards", []):
         if not isinstance(entry, dict) or not isinstance(entry.get("file"), str):
             raise InputError(f"{folder}/meta.json: malformed shard entry {entry!r}")
-        parts.append(_read_shard(Path(folder) / entry["file"]))
+        parts.append(read_shard(Path(folder) / entry["file"]))
         total += len(parts[-1]["hist"])
         if max_samples and total >= max_samples:
             break
