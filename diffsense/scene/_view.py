@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import jax
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
@@ -29,8 +30,14 @@ def road_json(road: Road, name: str) -> dict[str, Any]:
     }
 
 
+def _host(scene: Scene) -> Scene:
+    """The scene as numpy arrays: indexing them costs nothing (a jax array compiles each index)."""
+    return jax.tree.map(np.asarray, scene)
+
+
 def scene_json(scene: Scene, road: Road, road_name: str) -> dict[str, Any]:
     """One scene [T, V] as JSON-ready data: road, and per present vehicle its size and track."""
+    scene = _host(scene)
     mm = lambda a: np.round(np.asarray(a, np.float64), 3).tolist()  # noqa: E731
     vehicles = []
     for v in range(scene.num_vehicles):
@@ -52,17 +59,13 @@ def _outline(x, y, heading, length, width):
 
 
 def _draw_road(ax, road: Road, s_lo: float, s_hi: float, world: bool) -> None:
-    s = np.linspace(s_lo, s_hi, 400)
     lanes, width = int(road.num_lanes), float(road.lane_width_m)
+    s = np.broadcast_to(np.linspace(s_lo, s_hi, 400), (lanes + 1, 400))
+    d = np.broadcast_to(np.arange(lanes + 1)[:, None] * width, s.shape)
+    x, y = (np.asarray(a) for a in frenet_to_cartesian(road, s, d)[:2]) if world else (s, d)
     for k in range(lanes + 1):
-        d = np.full_like(s, k * width)
         edge = k in (0, lanes)
-        style = dict(color="k", lw=1.2 if edge else 0.6, ls="-" if edge else (0, (6, 6)))
-        if world:
-            x, y, _ = (np.asarray(a) for a in frenet_to_cartesian(road, s, d))
-            ax.plot(x, y, **style)
-        else:
-            ax.plot(s, d, **style)
+        ax.plot(x[k], y[k], color="k", lw=1.2 if edge else 0.6, ls="-" if edge else (0, (6, 6)))
 
 
 def _lane_change_frame(scene: Scene) -> int:
@@ -74,6 +77,7 @@ def _lane_change_frame(scene: Scene) -> int:
 def scene_figure(scene: Scene, road: Road, title: str = "") -> Figure:
     """Top: bird's-eye view (world x, y, true scale) of the 6 s around the target's lane change.
     Bottom: the whole scene in the road frame (s, d), lateral stretched."""
+    scene = _host(scene)
     fig = Figure(figsize=(14, 8), constrained_layout=True)
     top, bottom = fig.subplots(2, 1, height_ratios=(1.0, 1.2))
     present = np.flatnonzero(np.asarray(scene.present))
