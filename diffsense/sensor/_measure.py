@@ -82,10 +82,9 @@ def detect_of(terms, scene: Scene, params, config, key_or_noise: KeyOrNoise, mod
     check_temperature(temperature)
     tracks = tracks_of(scene)
     noise = jax.lax.optimization_barrier(jnp.swapaxes(_noise(key_or_noise, scene), -1, -2))
-    gates, range_m, azimuth_rad, range_sigma, azimuth_sigma = terms(
-        tracks, params, config, mode, temperature)
+    gates, range_m, _, range_sigma, azimuth_sigma = terms(tracks, params, config, mode, temperature)
     x, y = to_world(tracks, config.mount_x_m, range_m + range_sigma * noise[0],
-                    azimuth_rad + azimuth_sigma * noise[1])
+                    azimuth_sigma * noise[1])
     known = (jnp.arange(x.shape[0]) == EGO_INDEX)[:, None] | ~tracks.present
     x = jnp.where(known, tracks.x_m, x)
     y = jnp.where(known, tracks.y_m, y)
