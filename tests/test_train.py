@@ -93,15 +93,18 @@ def test_metrics_and_constant_velocity():
     np.testing.assert_allclose(rmse_per_second(shifted, fut_cv), np.full(5, 5.0))
 
 
+_nll_grad, _mse_grad, _bce_grad = (jax.jit(jax.value_and_grad(f)) for f in (nll, mse, class_bce))
+
+
 def test_losses_finite_and_gradients_at_extremes():
     fut = jnp.ones((2, 25, 2))
     for scale in (0.0, 1e3):
         raw = jnp.full((2, 25, 5), scale)
         logits = jnp.array([[scale, -scale, 0.0], [0.0, 0.0, 0.0]])
         label = jnp.array([1, 2])
-        for fn, args in ((nll, (raw, fut)), (mse, (raw, fut)), (class_bce, (logits, label))):
-            value, grad = jax.value_and_grad(fn)(*args)
-            assert np.isfinite(value) and np.all(np.isfinite(grad)), fn.__name__
+        for fn, args in ((_nll_grad, (raw, fut)), (_mse_grad, (raw, fut)), (_bce_grad, (logits, label))):
+            value, grad = fn(*args)
+            assert np.isfinite(value) and np.all(np.isfinite(grad))
     # NLL equals the closed form of the bivariate Gaussian density at moderate values.
     raw = jnp.array([[[0.3, -0.2, np.log(2.0), np.log(0.5), np.arctanh(0.3)]]])
     y = jnp.array([[[1.0, 0.5]]])
@@ -124,6 +127,7 @@ def test_cli_bad_config_is_one_line(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "diffsense.train", "--config", str(good_paths)],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "not a traffic dataset" in proc.stderr, proc.stderr
+    assert proc.stderr.strip().count("\n") == 0
 
 
 def test_shipped_default_config_loads():
@@ -131,3 +135,25 @@ def test_shipped_default_config_loads():
 
     cfg = load_default(TrainConfig, "train/default.toml")
     assert dataclasses.asdict(cfg.optim)["learning_rate"] == 1e-3 and cfg.optim.batch_size == 128
+
+
+def test_position_scale_folds_exactly_into_the_plain_network():
+    from flax import nnx
+
+    from diffsense.predict._model import model_from_params, param_shapes
+    from diffsense.train._loop import fold_position_scale
+
+    rng = np.random.default_rng(1)
+    shapes = param_shapes(False)
+    arrays = {k: {kk: rng.uniform(-0.3, 0.3, size=vv) for kk, vv in v.items()} for k, v in shapes.items()}
+    graphdef, params = nnx.split(model_from_params(False, arrays))
+    scale = 75.0
+    trained, folded = nnx.merge(graphdef, params), nnx.merge(graphdef, fold_position_scale(params, scale))
+    rng = np.random.default_rng(0)
+    x, h = rng.normal(size=(4, 2)) * 100, rng.normal(size=(4, 128))
+    # The only layers that see positions: the input embedding and the two mean outputs.
+    np.testing.assert_allclose(folded.ip_emb(x), trained.ip_emb(x / scale), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(folded.op(h)[:, :2], scale * trained.op(h)[:, :2], rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(folded.op(h)[:, 2:], trained.op(h)[:, 2:], rtol=1e-12, atol=1e-12)
+    same = jax.tree.map(lambda a, b: bool(np.array_equal(a, b)), nnx.state(trained.enc_lstm), nnx.state(folded.enc_lstm))
+    assert all(jax.tree.leaves(same))

@@ -17,6 +17,7 @@ inverse standard deviations).
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -214,11 +215,16 @@ class CSLSTM(nnx.Module):
         return self.context(enc[:, 0], grid[:, :N_SLOTS])
 
 
+@functools.lru_cache(maxsize=2)
+def _init_fn(maneuvers: bool):
+    """Compiled once per variant: the initial parameters as a function of the seed."""
+    return jax.jit(lambda key: nnx.split(CSLSTM(maneuvers, rngs=nnx.Rngs(params=key)))[1])
+
+
 def new_model(maneuvers: bool, seed: int) -> CSLSTM:
     """A freshly initialised network (PyTorch's default init), built in one compiled call."""
     graphdef, _ = nnx.split(nnx.eval_shape(lambda: CSLSTM(maneuvers, rngs=nnx.Rngs(0))))
-    state = jax.jit(lambda: nnx.split(CSLSTM(maneuvers, rngs=nnx.Rngs(seed)))[1])()
-    return nnx.merge(graphdef, state)
+    return nnx.merge(graphdef, _init_fn(maneuvers)(jax.random.key(seed)))
 
 
 def model_from_params(maneuvers: bool, params: dict) -> CSLSTM:

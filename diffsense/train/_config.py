@@ -30,7 +30,11 @@ class DataConfig:
 
 @dataclasses.dataclass(frozen=True)
 class OptimConfig:
-    """The reference recipe (Deo & Trivedi's train.py): Adam, MSE epochs then NLL epochs."""
+    """The reference recipe (Deo & Trivedi's train.py): Adam, MSE epochs then NLL epochs.
+
+    position_scale_ft: positions enter the network in units of this many feet during training
+    (1 = the reference); the scale is folded into the first and last layers when the weights are
+    written, so the result is a plain CS-LSTM in feet."""
 
     learning_rate: float = 1e-3
     batch_size: int = 128
@@ -38,8 +42,11 @@ class OptimConfig:
     mse_epochs: int = 5
     nll_epochs: int = 3
     seed: int = 0
+    position_scale_ft: float = 1.0
 
     def __post_init__(self):
+        if not self.position_scale_ft > 0:
+            raise InputError(f"optim.position_scale_ft must be > 0, got {self.position_scale_ft}")
         if not self.learning_rate > 0:
             raise InputError(f"optim.learning_rate must be > 0, got {self.learning_rate}")
         if self.batch_size < 1:

@@ -40,19 +40,34 @@ def _optimiser(learning_rate: float, clip_grad_norm: float) -> optax.GradientTra
     return optax.chain(optax.clip_by_global_norm(clip_grad_norm), optax.adam(learning_rate))
 
 
+def fold_position_scale(params: nnx.State, scale: float) -> nnx.State:
+    """The parameters of the plain network equal to the one trained with positions in units of
+    `scale` feet: ip_emb(x / s) = (W / s) x + b and s * (W h + b) for the two mean outputs, exact
+    linear algebra, so the shipped weights are a standard CS-LSTM in feet."""
+    pure = jax.tree.map(lambda x: x, nnx.to_pure_dict(params))
+    pure["ip_emb"]["weight"] = pure["ip_emb"]["weight"] / scale
+    pure["op"]["weight"] = pure["op"]["weight"].at[:, :2].multiply(scale)
+    pure["op"]["bias"] = pure["op"]["bias"].at[:2].multiply(scale)
+    folded = jax.tree.map(lambda x: x, params)
+    nnx.replace_by_pure_dict(folded, pure)
+    return folded
+
+
 @functools.lru_cache(maxsize=8)  # one compiled step per (structure, recipe): resumes reuse it
-def _make_step(graphdef: nnx.GraphDef, learning_rate: float, clip_grad_norm: float, maneuvers: bool):
+def _make_step(graphdef: nnx.GraphDef, learning_rate: float, clip_grad_norm: float, maneuvers: bool, scale: float):
     tx = _optimiser(learning_rate, clip_grad_norm)
 
     def loss_fn(params, batch, use_nll: bool):
         hist, fut, nbr_hist, nbr_slot, nbr_weight, lat, lon = batch
         model = nnx.merge(graphdef, params)
-        enc = model.context_compact(hist, nbr_hist, nbr_slot, nbr_weight)
+        # Positions enter in units of `scale` ft and the means leave in ft (see fold_position_scale).
+        enc = model.context_compact(hist / scale, nbr_hist / scale, nbr_slot, nbr_weight)
         if maneuvers:  # teacher forcing with the true manoeuvre, as the reference trains
             onehots = [jax.nn.one_hot(lat, N_LAT, dtype=enc.dtype), jax.nn.one_hot(lon, N_LON, dtype=enc.dtype)]
             raw = model.decode_raw(jnp.concatenate([enc, *onehots], axis=-1))
         else:
             raw = model.decode_raw(enc)
+        raw = jnp.concatenate([raw[..., :2] * scale, raw[..., 2:]], axis=-1)
         if not use_nll:
             return mse(raw, fut)
         loss = nll(raw, fut)
@@ -153,7 +168,8 @@ def train(
         params, opt_state = jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves])
         log(f"resumed from {ckpt} at step {start}/{total}")
 
-    step_fn = _make_step(graphdef, cfg.optim.learning_rate, cfg.optim.clip_grad_norm, cfg.maneuvers)
+    scale = cfg.optim.position_scale_ft
+    step_fn = _make_step(graphdef, cfg.optim.learning_rate, cfg.optim.clip_grad_norm, cfg.maneuvers, scale)
     predict = _make_predict(graphdef)
     t0 = time.monotonic()
     losses: list[float] = []
@@ -172,7 +188,7 @@ def train(
         if (g + 1) % 10 == 0:
             bar.set_postfix(epoch=epoch + 1, phase="nll" if use_nll else "mse", loss=f"{float(loss):.3f}")
         if (g + 1) % steps_per_epoch == 0:
-            fut = _validate(predict, params, val_set, cfg.run.val_batch_size)
+            fut = _validate(predict, fold_position_scale(params, scale), val_set, cfg.run.val_batch_size)
             rmse = rmse_per_second(fut, val_set.fut_m)
             train_loss = float(np.mean([float(x) for x in losses])) if len(losses) else float("nan")
             history.append({"epoch": epoch + 1, "phase": "nll" if use_nll else "mse",
@@ -189,6 +205,7 @@ def train(
     bar.close()
     wall = wall_before + time.monotonic() - t0
 
+    params = fold_position_scale(params, scale)
     fut = _validate(predict, params, val_set, cfg.run.val_batch_size)
     card = {
         "model": "CS-LSTM (Deo & Trivedi 2018), " + ("manoeuvre-based decoder" if cfg.maneuvers else "single-mode decoder"),
