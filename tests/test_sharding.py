@@ -20,7 +20,7 @@ from diffsense.tracks import prediction_frames
 from tests._toy_pipeline import TOY_GAIN, toy_detect, toy_predict, toy_scenes
 scenes, scenario = toy_scenes(n=3)  # 3 variants on 4 devices: exercises the zero-weight padding
 obj = make_objective(scenes, scenario, prediction_frames(scenes.num_frames), toy_detect(), toy_predict, TOY_GAIN)
-value, grad = obj.e2_and_grad(42.0)
+value, grad = obj.value_and_grad(42.0)
 print(json.dumps({"devices": jax.local_device_count(), "e2": float(value), "grad": float(grad),
                   "hard": obj.e_hard(42.0), "sharded": len(obj.data.weight.sharding.device_set)}))
 """

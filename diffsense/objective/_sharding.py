@@ -1,8 +1,13 @@
-"""Scene variants sharded over all local JAX devices (one device: nothing changes).
+"""Scene variants sharded over every JAX device (one device: nothing changes).
 
 Variants are independent until the final mean, so a 1-D device mesh over the variant axis lets
 XLA run each device's variants locally and reduce once. The variant count is padded to a
 multiple of the device count with copies of the last variant whose weight is 0.
+
+The mesh spans `jax.devices()`, i.e. every device of every process after
+`jax.distributed.initialize(...)`: each process holds the whole (cheap, seed-determined) batch
+and `make_array_from_callback` hands every device its own slice, so several hosts split the
+variants between them.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ def shard_leading_axis(tree, pad_weight_index: int | None = None):
     If `pad_weight_index` is given, `tree[pad_weight_index]` is the weight array whose padded
     entries are set to 0 (so padding never changes a mean).
     """
-    devices = jax.local_devices()
+    devices = jax.devices()
     ndev = len(devices)
     if ndev == 1:
         return tree
@@ -40,4 +45,9 @@ def shard_leading_axis(tree, pad_weight_index: int | None = None):
         tree = tuple(tree)
     mesh = Mesh(np.asarray(devices), (VARIANT_AXIS,))
     sharding = NamedSharding(mesh, PartitionSpec(VARIANT_AXIS))
-    return jax.device_put(tree, sharding)
+
+    def place(a):
+        host = np.asarray(a)
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+    return jax.tree.map(place, tree)
