@@ -7,7 +7,10 @@ path (`predict_mean`: only the N neighbours are encoded) under plain jax.jit; "g
 d(sum of predicted means)/d(target and neighbour histories, occupancy weights). The PyTorch side
 is a re-implementation of the reference highwayNet.forward in evaluation mode (masked_scatter_
 into the grid, one decode per manoeuvre), with the same weights; its gradient is w.r.t. the
-histories. Times are medians over --repeats calls after warm-up; compile time is reported apart.
+histories. "forward" is the predicted mean (manoeuvre variant: the most probable manoeuvre,
+decoded alone); "all modes" decodes all 6 manoeuvres like the reference's forward (the torch
+column is the same call in both rows). Times are medians over --repeats interleaved calls after
+warm-up; compile time is reported apart.
 torch is optional (never a runtime dependency): without it only the JAX rows are printed.
 """
 
@@ -22,7 +25,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense.predict import Predictor, load_predictor, predict_mean, state_dict_from_model
+from diffsense.predict import (
+    Predictor,
+    load_predictor,
+    predict_mean,
+    predict_model_frame,
+    si_to_model,
+    state_dict_from_model,
+)
 from diffsense.predict._model import new_model
 
 
@@ -63,8 +73,10 @@ def _jax_fns(predictor: Predictor, args):
     t0 = time.perf_counter()
     grad.lower(hist, nbr_hist, weight, predictor, slot).compile()
     compile_grad = time.perf_counter() - t0
+    all_modes = jax.jit(lambda p, *a: predict_model_frame(p, *(si_to_model(x) for x in a[:2]), *a[2:]).fut)
     fns = {
         "forward": lambda: forward(predictor, hist, nbr_hist, slot, weight).block_until_ready(),
+        "forward_all_modes": lambda: all_modes(predictor, hist, nbr_hist, slot, weight).block_until_ready(),
         "gradient": lambda: jax.block_until_ready(grad(hist, nbr_hist, weight, predictor, slot)),
     }
     return fns, {"compile_forward": compile_fwd, "compile_gradient": compile_grad}
@@ -170,7 +182,7 @@ def _torch_fns(sd, args, reference_mean: np.ndarray):
         nb = nbrs.clone().requires_grad_(True)
         mean_of(net(h, nb, mask)).sum().backward()
 
-    return {"forward": forward, "gradient": gradient}, agree
+    return {"forward": forward, "forward_all_modes": forward, "gradient": gradient}, agree
 
 
 def main() -> None:
@@ -192,7 +204,8 @@ def main() -> None:
     else:
         predictors = [Predictor.from_model(new_model(m, seed=0)) for m in (False, True)]
     print(f"CS-LSTM, B = {args.batch}, {args.neighbours} neighbours per target, float32, CPU "
-          f"({os.cpu_count()} cores), median of {args.repeats}; jax {jax.__version__}, torch {torch_version}")
+          f"({os.cpu_count()} cores), median of {args.repeats}; jax {jax.__version__}, torch {torch_version}"
+          + (f" ({torch.get_num_threads()} threads)" if torch_version else ""))
     print(f"{'variant':<10} {'op':<9} {'jax [ms]':>9} {'torch [ms]':>11} {'speed-up':>9} {'jax compile [s]':>16}")
     for predictor in predictors:
         name = "manoeuvre" if predictor.maneuvers else "single"
@@ -204,11 +217,15 @@ def main() -> None:
             tfns, agree = _torch_fns(state_dict_from_model(predictor.model()), inputs, ref)
             fns |= {f"torch_{k}": v for k, v in tfns.items()}
         t = _time_interleaved(fns, args.repeats)
-        for op in ("forward", "gradient"):
+        ops = ("forward", "forward_all_modes", "gradient") if predictor.maneuvers else ("forward", "gradient")
+        compile_s["compile_forward_all_modes"] = float("nan")
+        for op in ops:
             tr = t.get(f"torch_{op}")
             t_torch = f"{1e3 * tr:11.1f}" if tr else f"{'-':>11}"
             speedup = f"{tr / t[f'jax_{op}']:8.1f}x" if tr else f"{'-':>9}"
-            print(f"{name:<10} {op:<9} {1e3 * t[f'jax_{op}']:9.1f} {t_torch} {speedup} {compile_s['compile_' + op]:16.1f}")
+            c = compile_s["compile_" + op]
+            compile_txt = f"{c:16.1f}" if c == c else f"{'-':>16}"  # not measured for all modes
+            print(f"{name:<10} {op.replace('forward_all_modes', 'all modes'):<9} {1e3 * t[f'jax_{op}']:9.1f} {t_torch} {speedup} {compile_txt}")
         if agree is not None:
             print(f"{'':<10} (torch vs jax predicted mean: max |diff| = {agree:.2e} m)")
 

@@ -85,3 +85,18 @@ def test_cli_exit_code_two_in_a_real_process(tmp_path):
     assert proc.stderr.strip().count("\n") == 0 and proc.stderr.startswith("error:"), proc.stderr
     proc = subprocess.run([sys.executable, "-m", "diffsense.predict", "frobnicate"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr.startswith("error:"), proc.stderr
+
+
+def test_card_prints_the_model_card(tmp_path, capsys):
+    import json
+
+    from diffsense.predict import save_weights
+    from diffsense.predict._model import model_from_params, param_shapes
+
+    params = {k: {kk: np.zeros(vv, np.float32) for kk, vv in v.items()} for k, v in param_shapes(False).items()}
+    path = tmp_path / "w.msgpack"
+    save_weights(path, model_from_params(False, params), {"steps": 7, "validation": {"horizon_s": [1, 2]}})
+    assert _run(["card", "--weights", str(path)]) == 0
+    assert json.loads(capsys.readouterr().out) == {"steps": 7, "validation": {"horizon_s": [1, 2]}}
+    assert _run(["card", "--weights", str(tmp_path / "none.msgpack")]) == 2
+    assert "no model card" in capsys.readouterr().err
