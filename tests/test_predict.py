@@ -12,6 +12,7 @@ import _numpy_cslstm
 from diffsense.predict._model import model_from_params, param_shapes
 from diffsense.predict import (
     Predictor,
+    init_predictor,
     load_predictor,
     model_to_si,
     output_activation,
@@ -222,10 +223,12 @@ def test_frame_round_trip_and_axes():
     np.testing.assert_allclose(model_to_si(np.array([15.0, -30.0])), [-30 * 0.3048, -15 * 0.3048])
 
 
-def test_float32_in_float32_out(predictors):
+def test_float32_in_float32_out():
     hist, nbr_hist, slot, weight = _si_batch(10, np.float32)
-    out = _mean(predictors[False], hist, nbr_hist, slot, weight)
-    assert out.dtype == jnp.float32 and out.shape == (B, 25, 2)
+    predictor = init_predictor(maneuvers=False, seed=2)
+    assert jax.tree.leaves(predictor.state)[0].dtype == jnp.float32
+    out = _mean(predictor, hist, nbr_hist, slot, weight)
+    assert out.dtype == jnp.float32 and out.shape == (B, 25, 2) and np.all(np.isfinite(out))
 
 
 def test_small_public_functions_under_jit_equal_eager():

@@ -8,6 +8,7 @@ and axis conversion. CLI: `python -m diffsense.predict {parity,card}`.
 
 from diffsense.predict._api import (
     Predictor,
+    init_predictor,
     load_predictor,
     predict_mean,
     predict_mean_dense,
@@ -37,6 +38,7 @@ __all__ = [
     "N_SLOTS",
     "Prediction",
     "Predictor",
+    "init_predictor",
     "load_predictor",
     "load_weights",
     "model_from_state_dict",

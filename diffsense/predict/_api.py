@@ -16,7 +16,11 @@ Manoeuvre variant: `mode="most_probable"` (the default) returns the trajectory o
 probable lateral and the most probable longitudinal class, as the reference evaluation does
 (its gradient flows through that trajectory; the choice itself is piecewise constant);
 `mode="weighted"` returns the probability-weighted mean of the 6 trajectories (smooth in the
-inputs). The single-mode variant has one trajectory and ignores `mode`.
+inputs). The single-mode variant has one trajectory and ignores `mode`. Under jit, `mode` is a
+static argument: `jax.jit(predict_mean, static_argnames="mode")`.
+
+Differentiation is reverse-mode (`jax.grad`, `jax.vjp`): the LSTM has a hand-written backward
+(`jax.custom_vjp`), so forward-mode `jax.jvp` is not available.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from diffsense.errors import InputError
 from diffsense.predict._checkpoint import read_state_dict
 from diffsense.predict._convert import model_from_state_dict
 from diffsense.predict._frame import model_to_si, si_to_model
-from diffsense.predict._model import N_LAT, CSLSTM, Prediction
+from diffsense.predict._model import N_LAT, CSLSTM, Prediction, new_model
 from diffsense.predict._weights import DEFAULT_WEIGHTS, load_weights
 
 Mode = Literal["most_probable", "weighted"]
@@ -63,6 +67,11 @@ class Predictor:
         if dtype is not None:
             state = jax.tree.map(lambda p: p.astype(dtype), state)
         return nnx.merge(self.graphdef, state)
+
+
+def init_predictor(maneuvers: bool = False, seed: int = 0) -> Predictor:
+    """An untrained predictor (PyTorch's default initialisation): for tests and training only."""
+    return Predictor.from_model(new_model(maneuvers, seed))
 
 
 def load_predictor(path: str | Path | None = None) -> Predictor:
