@@ -25,7 +25,7 @@ def _cfg(tmp_path, data, name: str, maneuvers: bool = False, **optim) -> TrainCo
         "maneuvers": maneuvers,
         "data": {"path": str(data), "val_fraction": 0.25},
         "optim": {"batch_size": 16, "mse_epochs": 1, "nll_epochs": 1, "seed": 3, **optim},
-        "run": {"checkpoint_dir": str(tmp_path / name / "ckpt"), "checkpoint_every_steps": 2,
+        "run": {"checkpoint_dir": str(tmp_path / name / "ckpt"), "checkpoint_every_steps": 3,
                 "weights": str(tmp_path / name / "w.msgpack"), "val_batch_size": 32},
     })
 
@@ -43,7 +43,8 @@ def test_resume_equals_uninterrupted(tmp_path, data):
     part_cfg = _cfg(tmp_path, data, "part", maneuvers, mse_epochs=0, nll_epochs=2)
     assert train(part_cfg, progress=False, stop_after_steps=5) == {}  # interrupted after step 5
     assert not (tmp_path / "part" / "w.msgpack").exists()
-    resumed = train(part_cfg, resume=True, progress=False, log=lambda _: None)  # from step 4
+    # Resumes from the checkpoint of step 3, in the middle of the first epoch (4 steps each).
+    resumed = train(part_cfg, resume=True, progress=False, log=lambda _: None)
     a = state_dict_from_model(load_weights(tmp_path / "full" / "w.msgpack"))
     b = state_dict_from_model(load_weights(tmp_path / "part" / "w.msgpack"))
     for key in a:

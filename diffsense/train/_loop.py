@@ -103,8 +103,9 @@ def _validate(predict, params, val: Samples, batch_size: int) -> np.ndarray:
     return np.concatenate(out)
 
 
-def _save_checkpoint(path: Path, cfg: TrainConfig, step: int, leaves, history, wall_s: float) -> None:
+def _save_checkpoint(path: Path, cfg: TrainConfig, step: int, leaves, history, wall_s: float, epoch_loss) -> None:
     payload = {
+        "epoch_loss_sum": np.asarray(epoch_loss),  # running sum over the current epoch's steps
         "config": serialization.msgpack_serialize(to_dict(cfg)),
         "step": step,
         "wall_s": wall_s,
@@ -114,13 +115,14 @@ def _save_checkpoint(path: Path, cfg: TrainConfig, step: int, leaves, history, w
     _io.write_bytes(path, serialization.msgpack_serialize(payload))
 
 
-def _load_checkpoint(path: Path, cfg: TrainConfig, template_leaves) -> tuple[int, list, list, float]:
+def _load_checkpoint(path: Path, cfg: TrainConfig, template_leaves) -> tuple[int, list, list, float, np.ndarray]:
     try:
         payload = serialization.msgpack_restore(path.read_bytes())
         saved_cfg = serialization.msgpack_restore(payload["config"])
         leaves = [np.asarray(payload["leaves"][str(i)]) for i in range(len(template_leaves))]
         step, wall_s = int(payload["step"]), float(payload["wall_s"])
         history = serialization.msgpack_restore(payload["history"])
+        epoch_loss = np.asarray(payload["epoch_loss_sum"])
     except FileNotFoundError:
         raise InputError(f"--resume: no checkpoint at {path}") from None
     except Exception as e:  # noqa: BLE001 - any malformed checkpoint is the same refusal
@@ -132,7 +134,7 @@ def _load_checkpoint(path: Path, cfg: TrainConfig, template_leaves) -> tuple[int
     for got, want in zip(leaves, template_leaves):
         if got.shape != np.shape(want):
             raise InputError(f"--resume: checkpoint {path} does not match the model")
-    return step, leaves, list(history), wall_s
+    return step, leaves, list(history), wall_s, epoch_loss
 
 
 def train(
@@ -163,8 +165,12 @@ def train(
     leaves, treedef = jax.tree.flatten((params, opt_state))
     ckpt = Path(cfg.run.checkpoint_dir) / CHECKPOINT_NAME
     start, history, wall_before = 0, [], 0.0
+    # The epoch's training loss is summed on the device (no sync per step) and checkpointed, so
+    # a run resumed mid-epoch reports the same epoch loss as an uninterrupted one.
+    loss_sum = jnp.zeros((), jnp.float32)
     if resume:
-        start, leaves, history, wall_before = _load_checkpoint(ckpt, cfg, leaves)
+        start, leaves, history, wall_before, saved_sum = _load_checkpoint(ckpt, cfg, leaves)
+        loss_sum = jnp.asarray(saved_sum, jnp.float32)
         params, opt_state = jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves])
         log(f"resumed from {ckpt} at step {start}/{total}")
 
@@ -172,25 +178,25 @@ def train(
     step_fn = _make_step(graphdef, cfg.optim.learning_rate, cfg.optim.clip_grad_norm, cfg.maneuvers, scale)
     predict = _make_predict(graphdef)
     t0 = time.monotonic()
-    losses: list[float] = []
     bar = tqdm(total=total, initial=start, disable=not progress, unit="step", dynamic_ncols=True)
     perm_epoch, perm = -1, None
     for g in range(start, total):
         epoch, i = divmod(g, steps_per_epoch)
         if epoch != perm_epoch:
             perm_epoch, perm = epoch, np.random.default_rng([cfg.optim.seed, epoch]).permutation(len(train_set))
-            losses = []
+            if i == 0:
+                loss_sum = jnp.zeros((), jnp.float32)
         use_nll = epoch >= cfg.optim.mse_epochs
         batch = _batch(train_set, perm[i * bs : (i + 1) * bs])
         params, opt_state, loss = step_fn(params, opt_state, batch, use_nll)
-        losses.append(loss)
+        loss_sum = loss_sum + loss.astype(jnp.float32)
         bar.update(1)
         if (g + 1) % 10 == 0:
             bar.set_postfix(epoch=epoch + 1, phase="nll" if use_nll else "mse", loss=f"{float(loss):.3f}")
         if (g + 1) % steps_per_epoch == 0:
             fut = _validate(predict, fold_position_scale(params, scale), val_set, cfg.run.val_batch_size)
             rmse = rmse_per_second(fut, val_set.fut_m)
-            train_loss = float(np.mean([float(x) for x in losses])) if len(losses) else float("nan")
+            train_loss = float(loss_sum) / steps_per_epoch
             history.append({"epoch": epoch + 1, "phase": "nll" if use_nll else "mse",
                             "train_loss": train_loss, "val_rmse_m": [round(float(r), 4) for r in rmse]})
             bar.write(f"epoch {epoch + 1}/{epochs} ({history[-1]['phase']}): train loss {train_loss:.4f}, "
@@ -198,7 +204,7 @@ def train(
         done = g + 1
         if done % cfg.run.checkpoint_every_steps == 0 or done == total:
             wall = wall_before + time.monotonic() - t0
-            _save_checkpoint(ckpt, cfg, done, jax.tree.leaves((params, opt_state)), history, wall)
+            _save_checkpoint(ckpt, cfg, done, jax.tree.leaves((params, opt_state)), history, wall, loss_sum)
         if stop_after_steps is not None and done >= stop_after_steps and done < total:
             bar.close()
             return {}
