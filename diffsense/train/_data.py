@@ -18,7 +18,7 @@ from diffsense.errors import InputError
 from diffsense.predict import HIST_LEN, si_to_model
 
 # The layout's owner reads and checks shards (shapes, dtypes, finiteness, index ranges).
-from diffsense.scene._traffic_dataset import read_meta, read_shard
+from diffsense.scene import read_meta, read_shard
 
 
 @dataclasses.dataclass(frozen=True)
