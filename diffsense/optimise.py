@@ -116,7 +116,7 @@ def _load_config(args: argparse.Namespace):
         cfg = cfgio.load(OptimiseConfig, args.config)
     else:
         cfg = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
-    problem: dict[str, Any] = {}
+    problem: dict[str, Any] = cfgio.to_dict(cfg.problem)
     if args.sensor and args.sensor != "both":
         problem["sensor"] = args.sensor
     if args.param:
@@ -287,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         folder = out / sensor if len(sensors) > 1 else out
         results[sensor] = _run_one(sensor, args, cfg, folder, progress, predictor)
     for sensor, content in results.items():
-        print(f"\n{sensor}: " + report.summary_table(content, unit=content["unit"]))
+        print("\n" + report.summary_table(content, unit=content["unit"]))
     if len(results) > 1:
         table = report.comparison_table(results, unit=results[sensors[0]]["unit"])
         print("\nradar versus camera\n" + table)

@@ -108,3 +108,16 @@ def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
         assert (out / name).stat().st_size > 1000
     assert sorted(p.name for p in out.iterdir()) == ["detections.png", "objective.png", "result.json",
                                                      "rmse_horizon.png"]
+
+
+def test_config_file_values_reach_the_run_and_flags_override_them(tmp_path):
+    from diffsense.optimise import _load_config, _parser
+
+    text = (ROOT / "configs/optimise/default.toml").read_text()
+    text = text.replace("variants = 8", "variants = 3").replace("prediction_stride_frames = 4", "prediction_stride_frames = 6")
+    path = tmp_path / "mine.toml"
+    path.write_text(text)
+    cfg = _load_config(_parser().parse_args(["--config", str(path)]))
+    assert cfg.problem.variants == 3 and cfg.problem.prediction_stride_frames == 6
+    cfg = _load_config(_parser().parse_args(["--config", str(path), "--variants", "5", "--fill", "zero"]))
+    assert cfg.problem.variants == 5 and cfg.problem.fill == "zero" and cfg.problem.prediction_stride_frames == 6
