@@ -53,7 +53,7 @@ class ProblemConfig:
     fill: Literal["zero", "hold", "interp"] = "hold"
     estimator: EstimatorConfig = EstimatorConfig()
     seed: int = 0
-    prediction_stride_frames: int = 2
+    prediction_stride_frames: int = 4
     background_vehicles: int = 0
     float64: bool = True
 
