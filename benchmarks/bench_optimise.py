@@ -76,7 +76,7 @@ def main() -> None:
     from diffsense import _cli
     from diffsense.objective import ProblemConfig
     from diffsense.predict import load_predictor
-    from diffsense.solve import basin_check, dense_grid_search
+    from diffsense.solve import basin_check, dense_grid_search, solve
 
     _cli.setup_jax(float64=True, compilation_cache=False)
     predictor = load_predictor(args.model)
@@ -84,15 +84,12 @@ def main() -> None:
     problem, result, clock = timed_solve(cfg, predictor)
     obj = problem.objective
     # Time the solve's own evaluations again now that everything is compiled.
-    obj._soft_cache.clear()
-    obj._hard_cache.clear()
-    from diffsense.solve import solve
-
+    obj.forget()
     e2_soft, e_hard = obj.solver_fns()
     t0 = time.perf_counter()
     solve(e2_soft, e_hard, (30.0, 180.0))
     solve_s = time.perf_counter() - t0
-    obj._hard_cache.clear()
+    obj.forget()
     dense = dense_grid_search(obj.e_hard, (30.0, 180.0), 0.5)
     n_solve = result.evaluations["objective"] + result.evaluations["gradient"] + 2 * len(result.sweep)
     print("\n2. continuous solve versus the dense 0.5-deg hard grid (same objective, compiled)")
@@ -112,8 +109,7 @@ def main() -> None:
     bg_problem, _, _ = timed_solve(ProblemConfig(variants=args.variants, background_vehicles=100), predictor)
     bg = bg_problem.objective
     e2_soft, e_hard = bg.solver_fns()
-    bg._soft_cache.clear()
-    bg._hard_cache.clear()
+    bg.forget()
     t0 = time.perf_counter()
     solve(e2_soft, e_hard, (30.0, 180.0))
     bg_s = time.perf_counter() - t0

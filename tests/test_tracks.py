@@ -62,11 +62,12 @@ def test_soft_fill_is_continuous_in_p_with_finite_gradient(policy):
     z = jnp.asarray(rng.normal(size=(31, 2)))
     mask = jnp.asarray(rng.random(31) < 0.4, jnp.float64)
 
-    def f(eps):
-        return jnp.sum(fill_window(z, jnp.clip(mask + eps, 0.0, 1.0) * (1 - eps) + eps * (1 - mask), policy) ** 2)
-
-    # Close to the hard point, the soft fill is close to the hard fill.
-    assert abs(f(1e-7) - f(0.0)) < 1e-4
+    hard = fill_window(z, mask, policy)
+    for eps in (1e-3, 1e-6):
+        # p within eps of the 0/1 pattern: the soft fill is within O(eps) of the hard one.
+        near = mask * (1 - eps) + (1 - mask) * eps
+        gap = float(jnp.max(jnp.abs(fill_window(z, near, policy) - hard)))
+        assert gap < 100 * eps * float(jnp.max(jnp.abs(z)))
     for p_value in (0.0, 0.3, 1.0):
         g = jax.grad(lambda p: jnp.sum(fill_window(z, p, policy)))(jnp.full(31, p_value))
         assert np.all(np.isfinite(np.asarray(g)))

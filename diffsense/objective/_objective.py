@@ -183,6 +183,11 @@ class Objective:
         """The sensor's detections of every variant at r."""
         return self._detections_jit(jnp.asarray(r, self.dtype), jnp.asarray(tau, self.dtype), self.data, mode)
 
+    def forget(self) -> None:
+        """Drop the memoised evaluations (the compiled programs stay): for timing a solve again."""
+        self._soft_cache.clear()
+        self._hard_cache.clear()
+
     def solver_fns(self, dtype=jnp.float64) -> tuple[Callable[[Array, Array], Array], Callable[[Array], float]]:
         """(e2_soft, e_hard) in the form `diffsense.solve.solve` takes.
 
