@@ -38,9 +38,10 @@ def data(tmp_path_factory):
 def test_resume_equals_uninterrupted(tmp_path, data):
     maneuvers = True  # the variant with every loss term (NLL + both class losses)
     # NLL epochs only: one compiled step (the MSE step is exercised by the single-mode test).
-    full_cfg = _cfg(tmp_path, data, "full", maneuvers, mse_epochs=0, nll_epochs=2)
+    # The cosine schedule: its position must survive the interruption too.
+    full_cfg = _cfg(tmp_path, data, "full", maneuvers, mse_epochs=0, nll_epochs=2, schedule="cosine")
     card = train(full_cfg, progress=False, log=lambda _: None)
-    part_cfg = _cfg(tmp_path, data, "part", maneuvers, mse_epochs=0, nll_epochs=2)
+    part_cfg = _cfg(tmp_path, data, "part", maneuvers, mse_epochs=0, nll_epochs=2, schedule="cosine")
     assert train(part_cfg, progress=False, stop_after_steps=5) == {}  # interrupted after step 5
     assert not (tmp_path / "part" / "w.msgpack").exists()
     # Resumes from the checkpoint of step 3, in the middle of the first epoch (4 steps each).
@@ -129,6 +130,31 @@ def test_cli_bad_config_is_one_line(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "not a traffic dataset" in proc.stderr, proc.stderr
     assert proc.stderr.strip().count("\n") == 0
+
+
+def test_learning_rate_schedules():
+    from diffsense.train._config import OptimConfig
+    from diffsense.train._loop import _optimiser
+
+    def lr_at(optim: OptimConfig, step: int, total: int) -> float:
+        """The size of update number `step` under a constant unit gradient: Adam's normalised
+        moment is then 1 (to eps), so the update is the learning rate itself."""
+        tx = _optimiser(optim, total)
+        state = tx.init(jnp.zeros(()))
+        for _ in range(step + 1):
+            update, state = tx.update(jnp.ones(()), state)
+        return -float(update)
+
+    assert lr_at(OptimConfig(), 0, 20) == pytest.approx(1e-3, rel=1e-5)
+    assert lr_at(OptimConfig(), 20, 20) == pytest.approx(1e-3, rel=1e-5)
+    cosine = OptimConfig(schedule="cosine", final_lr_fraction=0.01)
+    assert lr_at(cosine, 0, 20) == pytest.approx(1e-3, rel=1e-5)
+    assert lr_at(cosine, 10, 20) == pytest.approx(1e-3 * (0.01 + 0.99 * 0.5), rel=1e-5)
+    assert lr_at(cosine, 20, 20) == pytest.approx(1e-5, rel=1e-4)
+    with pytest.raises(InputError, match="optim.schedule"):
+        OptimConfig(schedule="linear")
+    with pytest.raises(InputError, match="final_lr_fraction"):
+        OptimConfig(final_lr_fraction=2.0)
 
 
 def test_shipped_default_config_loads():

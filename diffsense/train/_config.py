@@ -34,7 +34,9 @@ class OptimConfig:
 
     position_scale_ft: positions enter the network in units of this many feet during training
     (1 = the reference); the scale is folded into the first and last layers when the weights are
-    written, so the result is a plain CS-LSTM in feet."""
+    written, so the result is a plain CS-LSTM in feet.
+    schedule: "constant" (the reference) or "cosine": the learning rate decays along a half cosine
+    over all steps of the run to `final_lr_fraction` x learning_rate."""
 
     learning_rate: float = 1e-3
     batch_size: int = 128
@@ -43,8 +45,14 @@ class OptimConfig:
     nll_epochs: int = 3
     seed: int = 0
     position_scale_ft: float = 1.0
+    schedule: str = "constant"
+    final_lr_fraction: float = 0.01
 
     def __post_init__(self):
+        if self.schedule not in ("constant", "cosine"):
+            raise InputError(f"optim.schedule must be 'constant' or 'cosine', got {self.schedule!r}")
+        if not 0.0 <= self.final_lr_fraction <= 1.0:
+            raise InputError(f"optim.final_lr_fraction must be in [0, 1], got {self.final_lr_fraction}")
         if not self.position_scale_ft > 0:
             raise InputError(f"optim.position_scale_ft must be > 0, got {self.position_scale_ft}")
         if not self.learning_rate > 0:

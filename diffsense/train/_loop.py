@@ -24,7 +24,7 @@ from diffsense.config import to_dict
 from diffsense.errors import InputError
 from diffsense.predict import model_to_si, select_mean
 from diffsense.predict._model import N_LAT, N_LON, new_model
-from diffsense.train._config import TrainConfig
+from diffsense.train._config import OptimConfig, TrainConfig
 from diffsense.train._data import Samples, load_samples, split_by_simulation
 from diffsense.train._loss import class_bce, mse, nll
 from diffsense.train._metrics import constant_velocity_m, rmse_per_second
@@ -36,8 +36,14 @@ def _batch(s: Samples, index: np.ndarray) -> tuple[np.ndarray, ...]:
     return (s.hist[index], s.fut[index], s.nbr_hist[index], s.nbr_slot[index], s.nbr_weight[index], s.lat[index], s.lon[index])
 
 
-def _optimiser(learning_rate: float, clip_grad_norm: float) -> optax.GradientTransformation:
-    return optax.chain(optax.clip_by_global_norm(clip_grad_norm), optax.adam(learning_rate))
+def _optimiser(optim: OptimConfig, total_steps: int) -> optax.GradientTransformation:
+    """Adam after global-norm clipping, as the reference; the learning rate constant or a cosine
+    decay over the whole run. The step count lives in the optimiser state, so a resumed run
+    continues the schedule where it stopped."""
+    lr = optim.learning_rate
+    if optim.schedule == "cosine":
+        lr = optax.cosine_decay_schedule(optim.learning_rate, max(total_steps, 1), alpha=optim.final_lr_fraction)
+    return optax.chain(optax.clip_by_global_norm(optim.clip_grad_norm), optax.adam(lr))
 
 
 def fold_position_scale(params: nnx.State, scale: float) -> nnx.State:
@@ -54,8 +60,9 @@ def fold_position_scale(params: nnx.State, scale: float) -> nnx.State:
 
 
 @functools.lru_cache(maxsize=8)  # one compiled step per (structure, recipe): resumes reuse it
-def _make_step(graphdef: nnx.GraphDef, learning_rate: float, clip_grad_norm: float, maneuvers: bool, scale: float):
-    tx = _optimiser(learning_rate, clip_grad_norm)
+def _make_step(graphdef: nnx.GraphDef, optim: OptimConfig, total_steps: int, maneuvers: bool):
+    tx = _optimiser(optim, total_steps)
+    scale = optim.position_scale_ft
 
     def loss_fn(params, batch, use_nll: bool):
         hist, fut, nbr_hist, nbr_slot, nbr_weight, lat, lon = batch
@@ -161,7 +168,7 @@ def train(
     total = epochs * steps_per_epoch
 
     graphdef, params = nnx.split(new_model(cfg.maneuvers, cfg.optim.seed))
-    opt_state = _optimiser(cfg.optim.learning_rate, cfg.optim.clip_grad_norm).init(params)
+    opt_state = _optimiser(cfg.optim, total).init(params)
     leaves, treedef = jax.tree.flatten((params, opt_state))
     ckpt = Path(cfg.run.checkpoint_dir) / CHECKPOINT_NAME
     start, history, wall_before = 0, [], 0.0
@@ -175,7 +182,7 @@ def train(
         log(f"resumed from {ckpt} at step {start}/{total}")
 
     scale = cfg.optim.position_scale_ft
-    step_fn = _make_step(graphdef, cfg.optim.learning_rate, cfg.optim.clip_grad_norm, cfg.maneuvers, scale)
+    step_fn = _make_step(graphdef, cfg.optim, total, cfg.maneuvers)
     predict = _make_predict(graphdef)
     t0 = time.monotonic()
     bar = tqdm(total=total, initial=start, disable=not progress, unit="step", dynamic_ncols=True)
