@@ -8,7 +8,12 @@ Strategy (DESIGN.md, "The solver"):
 3. the final answer is chosen by the HARD objective: the soft optimum is kept when it is at
    least as good as the best step, otherwise the other candidates (earlier levels' optima, the
    best step itself) are compared and `notes` says why the answer is not the soft optimum. So
-   E_hard(r*) <= min over steps of E_hard always holds.
+   E_hard(r*) <= min over steps of E_hard always holds;
+4. a hard polish: a compass search on E_hard around that answer with the evaluations left in
+   the budget (at most `SolveConfig.hard_polish`). The soft objective cannot see the hard one's
+   fine structure (a vehicle toggling in and out of the FOV at one instant moves E_hard by
+   centimetres over a fraction of a degree); a few hard probes near r* settle it, and a probe is
+   only accepted when it is strictly better, so this step never makes the answer worse.
 
 E^2 is optimised (the gradient of sqrt is NaN at 0); E = sqrt(E^2) is reported. Every objective
 and gradient evaluation of step 2-3 is counted against `SolveConfig.max_evaluations`.
@@ -58,6 +63,8 @@ class SolveConfig:
         dtype: float type of the outer problem (r, tau).
         method: `secant` (BracketedSecant, warm-started) or `bisection` (optx.Bisection on
             the whole bracket at every level).
+        hard_polish: most hard evaluations of the final compass search around r* (0: none);
+            it only uses what the budget has left after the soft levels.
 
     The defaults: three levels halving tau reach the best dense-grid basin of the rippled
     test objective where tau = 1 alone does not (tests/test_solve.py) and, with the secant,
@@ -70,8 +77,11 @@ class SolveConfig:
     max_evaluations: int = 20
     dtype: Literal["float64", "float32"] = "float64"
     method: Literal["secant", "bisection"] = "secant"
+    hard_polish: int = 6
 
     def __post_init__(self):
+        if self.hard_polish < 0:
+            raise InputError(f"hard_polish {self.hard_polish} must be >= 0")
         taus = tuple(self.tau_schedule)
         if not taus or any(not (math.isfinite(t) and t > 0) for t in taus):
             raise InputError(f"tau_schedule {taus} must be positive finite numbers")
@@ -219,6 +229,27 @@ def _level_secant(g, counted, y0, tau, lower, upper, probe, tol, max_steps, budg
     return float(sol.value), n, int(sol.state.bound), bool(sol.state.done)
 
 
+def _hard_polish(counted, r, e_hard, lower, upper, probes, min_step):
+    """Compass search on E_hard from (r, e_hard) inside [lower, upper]: probe r + step, then
+    r - step, move on a strict improvement, halve the step when neither side improves. Spends
+    at most `probes` hard evaluations (probes outside the bracket cost nothing); returns the best
+    (r, E_hard) seen."""
+    step = (upper - lower) / 16.0
+    while probes > 0 and step >= min_step:
+        moved = False
+        for candidate in (r + step, r - step):
+            if probes == 0 or not lower <= candidate <= upper:
+                continue
+            probes -= 1
+            e = counted.hard(candidate)
+            if e < e_hard:
+                r, e_hard, moved = candidate, e, True
+                break
+        if not moved:
+            step *= 0.5
+    return r, e_hard
+
+
 def _level_bisection(g, counted, y0, tau, lower, upper, tol, max_steps):
     before = counted.gradient
     g_lo, g_hi = counted.grad(lower, tau), counted.grad(upper, tau)
@@ -342,6 +373,18 @@ def solve(
             f"best step r={best.r:.6g} ({best.E_hard:.6g} m): soft and hard objectives disagree "
             f"there; answer r={r_star:.6g} is the best of {len(candidates)} candidates on E_hard"
         )
+    spent = counted.objective + counted.gradient
+    # One evaluation stays back for E_soft at a polished r*.
+    probes = min(config.hard_polish, config.max_evaluations - spent - 1)
+    if probes > 0:
+        r_polished, e_polished = _hard_polish(counted, r_star, e_hard_star, lower, upper, probes, xtol)
+        if r_polished != r_star:
+            notes.append(
+                f"hard polish: r={r_star:.6g} -> {r_polished:.6g} lowered E_hard from "
+                f"{e_hard_star:.6g} to {e_polished:.6g} m (the soft objective cannot resolve "
+                f"differences this fine)"
+            )
+            r_star, e_hard_star = r_polished, e_polished
     step_hit = next((p for p in sweep_points if p.r == r_star), None)
     e_soft_star = step_hit.E_soft if step_hit else _e_from_e2(counted.e2(r_star, taus[-1]))
     total = counted.objective + counted.gradient
