@@ -1,0 +1,332 @@
+"""The grid-search baseline: the continuous solve against grids, bounded Brent and a Bayesian optimiser.
+
+    nice -n 19 python benchmarks/bench_baseline.py [--variants 8] [--dense-step 0.5] [--problems ...]
+
+On one objective E(r) (the main job's: diffsense.objective.build_problem), every method below
+searches the same interval and is judged by the hard E of its answer:
+
+    continuous solve        diffsense.solve.solve: the paper's sweep, then optimistix refinement
+    paper grid (hard)       the sweep's steps alone (30, 60, ..., 180 deg for HFOV), best E_hard
+    dense grid (hard)       diffsense.solve.dense_grid_search every --dense-step
+    Brent on E_hard/E_soft  scipy.optimize.minimize_scalar(method="bounded"), derivative-free
+    Bayesian (optuna TPE)   optional extra `baseline` (skipped with a line when not installed)
+
+Evaluations are the objective's compiled programs that actually ran (its own counters, memo
+misses only): hard = hard E, soft = soft E^2 value only, grad = soft E^2 value and gradient
+(the library serves every soft request of the solve, sweep values included, with the value-and-
+gradient program). Everything is compiled once first; the objective forgets its memo before
+each method, so no method reuses another's evaluations. E_hard(r*) of an answer the method did
+not evaluate itself is computed for the table and not counted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import platform
+import time
+from collections.abc import Callable
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+KINDS = ("hard", "soft", "grad")
+# The objective's counter of each kind: the value-only program is the benchmark's own.
+_COUNTER = {"hard": "hard", "grad": "soft"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Setting:
+    """One comparison: the problem and the size knobs of the methods.
+
+    Attributes:
+        sensor, param: the free parameter (`param` as in diffsense.objective.ProblemConfig).
+        interval: (lo, hi) in the parameter's units.
+        dense_step: spacing of the dense hard grid, parameter units.
+        brent_maxiter: iteration cap of bounded Brent (it stops earlier at xatol).
+        trials: evaluations of the Bayesian optimiser.
+        xtol_rel: Brent's xatol relative to the interval width (the solve's default, 1e-3).
+        seed: the Bayesian optimiser's seed.
+    """
+
+    sensor: str
+    param: str
+    interval: tuple[float, float]
+    dense_step: float = 0.5
+    brent_maxiter: int = 100
+    trials: int = 40
+    xtol_rel: float = 1e-3
+    seed: int = 0
+
+    @property
+    def label(self) -> str:
+        return f"{self.sensor} {self.param} {self.interval[0]:g}-{self.interval[1]:g}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Evaluation:
+    """One program run: kind (hard, soft, grad), r, the value (E [m] hard, E^2 [m^2] soft) and
+    its wall time [s]."""
+
+    kind: str
+    r: float
+    value: float
+    wall_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class MethodRun:
+    """One method's search: its answer, E_hard of the answer [m], program runs and wall time."""
+
+    name: str
+    r_star: float
+    E_hard_star: float
+    counts: dict[str, int]
+    wall_s: float
+    trace: tuple[Evaluation, ...]
+    note: str = ""
+
+    @property
+    def evaluations(self) -> int:
+        return sum(self.counts.values())
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    setting: Setting
+    unit: str
+    runs: tuple[MethodRun, ...]
+    dense: object  # diffsense.solve.DenseGrid (the dense-grid row's search)
+    skipped: tuple[str, ...]
+    cost_s: dict[str, float]  # mean wall time of one program run of each kind
+
+    @property
+    def best(self) -> float:
+        """The smallest E_hard seen anywhere in the comparison [m]."""
+        seen = [e.value for run in self.runs for e in run.trace if e.kind == "hard"]
+        return min(seen + [run.E_hard_star for run in self.runs])
+
+
+class Recorder:
+    """Counting wrappers on the objective's public evaluation methods, and a value-only soft
+    program. The solver callbacks of `Objective.solver_fns` look the methods up at call time,
+    so the solve's evaluations are recorded too; the objective's own counters cross-check."""
+
+    def __init__(self, obj):
+        self.obj = obj
+        self.trace: list[Evaluation] = []
+        # The fixed data is an argument, as in the objective: XLA must not fold it in.
+        self._value_jit = jax.jit(obj.traced_e2)
+
+    def _wrap(self, kind: str, method: Callable) -> Callable:
+        def counted(r, *args):
+            before, t0 = self.obj.counts[_COUNTER[kind]], time.perf_counter()
+            out = method(r, *args)
+            if self.obj.counts[_COUNTER[kind]] > before:  # a memo hit runs no program
+                value = out[0] if isinstance(out, tuple) else out
+                self.trace.append(Evaluation(kind, float(r), float(value), time.perf_counter() - t0))
+            return out
+
+        return counted
+
+    def __enter__(self) -> Recorder:
+        self.trace = []
+        self.obj.forget()
+        self._start = dict(self.obj.counts)
+        self.obj.value_and_grad = self._wrap("grad", type(self.obj).value_and_grad.__get__(self.obj))
+        self.obj.e_hard = self._wrap("hard", type(self.obj).e_hard.__get__(self.obj))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        del self.obj.value_and_grad, self.obj.e_hard
+        for kind, counter in _COUNTER.items():
+            ran = self.obj.counts[counter] - self._start[counter]
+            if exc[0] is None and ran != self.counts()[kind]:
+                raise RuntimeError(f"{kind}: the objective ran {ran} programs, the recorder saw {self.counts()[kind]}")
+
+    def e2_value(self, r: float, tau: float = 1.0) -> float:
+        """Soft E^2 [m^2] at r without its gradient (what a derivative-free method needs)."""
+        t0 = time.perf_counter()
+        dtype = self.obj.dtype
+        value = float(self._value_jit(jnp.asarray(r, dtype), jnp.asarray(tau, dtype), self.obj.data))
+        self.trace.append(Evaluation("soft", float(r), value, time.perf_counter() - t0))
+        return value
+
+    def counts(self) -> dict[str, int]:
+        return {k: sum(e.kind == k for e in self.trace) for k in KINDS}
+
+    def run(self, name: str, search: Callable[[], float], note: str = "") -> MethodRun:
+        """Time `search() -> r*` with the memo cleared; E_hard(r*) afterwards, not counted."""
+        with self:
+            t0 = time.perf_counter()
+            r_star = float(search())
+            wall = time.perf_counter() - t0
+            trace = tuple(self.trace)
+        e_star = next((e.value for e in trace if e.kind == "hard" and e.r == r_star), None)
+        if e_star is None:
+            e_star = self.obj.e_hard(r_star)
+        counts = {k: sum(e.kind == k for e in trace) for k in KINDS}
+        return MethodRun(name, r_star, float(e_star), counts, wall, trace, note)
+
+
+def build(setting: Setting, variants: int, scenarios: tuple[str, ...] | None = None, predictor=None):
+    """The main job's problem for `setting` (shipped weights unless a predictor is given)."""
+    from diffsense.objective import PAPER_SCENARIOS, ProblemConfig, build_problem
+
+    cfg = ProblemConfig(sensor=setting.sensor, param=setting.param, variants=variants,
+                        scenarios=tuple(scenarios or PAPER_SCENARIOS))
+    return build_problem(cfg, predictor=predictor)
+
+
+def _brent(f: Callable[[float], float], setting: Setting) -> float:
+    from scipy.optimize import minimize_scalar
+
+    lo, hi = setting.interval
+    res = minimize_scalar(f, bounds=(lo, hi), method="bounded",
+                          options={"xatol": setting.xtol_rel * (hi - lo), "maxiter": setting.brent_maxiter})
+    return float(res.x)
+
+
+def _optuna(e_hard: Callable[[float], float], setting: Setting) -> float:
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(sampler=optuna.samplers.TPESampler(seed=setting.seed))
+    study.optimize(lambda trial: e_hard(trial.suggest_float("r", *setting.interval)), n_trials=setting.trials)
+    return float(study.best_params["r"])
+
+
+def optuna_available() -> bool:
+    try:
+        import optuna  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def compare(problem, setting: Setting) -> Comparison:
+    """Run every method on `problem.objective` (see the module docstring)."""
+    from diffsense.solve import DenseGrid, default_steps, dense_grid_search, solve
+
+    obj = problem.objective
+    lo, hi = setting.interval
+    rec = Recorder(obj)
+    e2_soft, e_hard = obj.solver_fns()
+    # Compile every program once (the solve's root find included; it is cached for this e2_soft).
+    solve(e2_soft, e_hard, (lo, hi))
+    rec.e2_value(lo)
+    import scipy.optimize  # noqa: F401  (its first import takes a second: not a method's cost)
+
+    runs, skipped = [], []
+    result = {}
+
+    def continuous():
+        result["solve"] = solve(e2_soft, e_hard, (lo, hi))
+        return result["solve"].r_star
+
+    runs.append(rec.run("continuous solve (sweep + optimistix)", continuous))
+    res = result["solve"]
+    runs[-1] = dataclasses.replace(runs[-1], note="; ".join(res.notes) + ("; on a bound" if res.on_bound else ""))
+
+    steps = default_steps(lo, hi)
+
+    def grid():
+        e = [obj.e_hard(float(r)) for r in steps]
+        return float(steps[int(np.argmin(e))])
+
+    kind = "paper" if setting.param.startswith("hfov") else "stepped"
+    runs.append(rec.run(f"{kind} grid, {len(steps)} steps (hard)", grid))
+    dense: dict[str, DenseGrid] = {}
+
+    def dense_search():
+        dense["grid"] = dense_grid_search(lambda r: obj.e_hard(r), (lo, hi), setting.dense_step)
+        g = dense["grid"]
+        return float(g.r[g.best_index])
+
+    runs.append(rec.run(f"dense grid, step {setting.dense_step:g} (hard)", dense_search))
+    runs.append(rec.run("bounded Brent on E_hard (scipy)", lambda: _brent(lambda r: obj.e_hard(r), setting)))
+    runs.append(rec.run("bounded Brent on E_soft (scipy)", lambda: _brent(rec.e2_value, setting)))
+    if optuna_available():
+        runs.append(rec.run(f"Bayesian, optuna TPE, {setting.trials} trials (hard)",
+                            lambda: _optuna(lambda r: obj.e_hard(r), setting)))
+    else:
+        skipped.append("Bayesian (optuna TPE): skipped: optuna is not installed (pip install -e '.[baseline]')")
+    every = [e for run in runs for e in run.trace]
+    cost = {k: float(np.median([e.wall_s for e in every if e.kind == k])) for k in KINDS
+            if any(e.kind == k for e in every)}
+    return Comparison(setting, problem.param.unit, tuple(runs), dense["grid"], tuple(skipped), cost)
+
+
+def table(comp: Comparison) -> str:
+    """The comparison as aligned text (diffsense.report.format_table)."""
+    from diffsense.report import format_table
+
+    best = comp.best
+    headers = ["method", "evals hard/soft/grad", "wall s", f"r* {comp.unit}", "E_hard(r*) m", "E_hard - best m"]
+    rows = [[run.name, " / ".join(str(run.counts[k]) for k in KINDS), f"{run.wall_s:.1f}",
+             f"{run.r_star:.2f}", f"{run.E_hard_star:.4f}", f"{run.E_hard_star - best:+.4f}"] for run in comp.runs]
+    lines = [format_table(headers, rows)]
+    lines += [f"  {s}" for s in comp.skipped]
+    lines.append("median wall of one program run: " + ", ".join(f"{k} {v:.2f} s" for k, v in comp.cost_s.items()))
+    notes = [f"  {run.name}: {run.note}" for run in comp.runs if run.note]
+    return "\n".join(lines + (["notes:"] + notes if notes else []))
+
+
+def best_so_far(obj, run: MethodRun) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(evaluations used, cumulative wall s, best E_hard among the points evaluated so far [m]).
+
+    A point evaluated only softly gets its E_hard computed here, off the method's books (for the
+    convergence figure; these evaluations are not counted against the method).
+    """
+    e_hard = {e.r: e.value for e in run.trace if e.kind == "hard"}
+    best, out = np.inf, []
+    for e in run.trace:
+        if e.r not in e_hard:
+            e_hard[e.r] = obj.e_hard(e.r)
+        best = min(best, e_hard[e.r])
+        out.append(best)
+    n = np.arange(1, len(run.trace) + 1)
+    return n, np.cumsum([e.wall_s for e in run.trace]), np.asarray(out)
+
+
+def _parse_problem(text: str) -> tuple[str, str, tuple[float, float]]:
+    try:
+        sensor, param, lo, hi = text.split(":")
+        return sensor, param, (float(lo), float(hi))
+    except ValueError:
+        raise SystemExit(f"error: --problems entries are SENSOR:PARAM:LO:HI, got {text!r}") from None
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--variants", type=int, default=8, help="variants per scenario")
+    p.add_argument("--scenarios", default="", help="comma-separated (default: the paper's six)")
+    p.add_argument("--problems", nargs="+", default=["radar:hfov_deg:30:180", "radar:range_m:30:200"],
+                   help="SENSOR:PARAM:LO:HI each (default: radar HFOV, the main job, and radar range)")
+    p.add_argument("--dense-step", type=float, default=0.5, help="dense grid spacing, parameter units")
+    p.add_argument("--brent-maxiter", type=int, default=100)
+    p.add_argument("--trials", type=int, default=40, help="Bayesian optimiser evaluations")
+    args = p.parse_args()
+
+    from diffsense import _cli
+    from diffsense.predict import load_predictor
+
+    _cli.setup_jax(float64=True, compilation_cache=True)
+    print(f"jax {jax.__version__} on {jax.default_backend()}, {os.cpu_count()} CPU cores, "
+          f"{platform.processor() or platform.machine()}; variants per scenario {args.variants}")
+    predictor = load_predictor(None)
+    scenarios = tuple(s for s in args.scenarios.split(",") if s) or None
+    for text in args.problems:
+        sensor, param, interval = _parse_problem(text)
+        setting = Setting(sensor, param, interval, dense_step=args.dense_step,
+                          brent_maxiter=args.brent_maxiter, trials=args.trials)
+        problem = build(setting, args.variants, scenarios, predictor)
+        comp = compare(problem, setting)
+        n = len(problem.scenario_names) * args.variants
+        print(f"\n{setting.label} ({n} scenes)")
+        print(table(comp))
+
+
+if __name__ == "__main__":
+    main()
