@@ -1,0 +1,308 @@
+"""The speed/accuracy trade of the main job: each knob a user can turn, one at a time.
+
+    python benchmarks/bench_tradeoff.py [--variants-ref 16] [--grid-step 1] [--quick] [--model PATH]
+
+From the default of `python -m diffsense.optimise --param hfov --interval 30 180`
+(configs/optimise/default.toml: radar, six scenarios x 8 variants, mean-field estimator, final
+temperature multiplier 1, float64) one knob changes at a time: the estimator (Monte-Carlo with
+K = 1, 4, 16, 64; hard), the final temperature multiplier (0.5, 2, 4; the continuation keeps its
+shape, as `--tau` does), float32, and the variants per scenario (1, 2, 4). Each row runs the main
+job's search: the stepped sweep and the continuous solve (for the hard estimator, the sweep and
+an even hard grid in the best bracket, as diffsense.optimise does).
+
+Error is measured against a reference: a dense hard grid (--grid-step, deg) over the interval on
+--variants-ref variants per scenario. r*_ref is its best point and E_hard_ref its hard objective;
+every row's r* is evaluated on it: dE_hard = E_hard_ref(r*) - E_hard_ref(r*_ref) [m] (negative
+when r* beats every grid point).
+
+Columns: compile s, JAX compilation (trace, lowering, backend; diffsense._timing.CompileClock)
+of building the row's problem and of its search; build s, the rest of building the problem
+(scenes, ground-truth predictions); run s, the search without compilation; evaluations, the
+objective programs the search ran (soft value-and-gradient and hard). Rows marked * reuse the
+default's compiled problem (the temperature is a traced argument, and the hard estimator needs
+only the hard program): a fresh process would compile as much as the default row. Seeds are
+fixed (the config's seed 0): the same command gives the same r* and errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import gc
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+
+KNOBS = ("default", "estimator", "temperature", "precision", "variants")
+MC_SAMPLES = (1, 4, 16, 64)
+TAUS = (0.5, 2.0, 4.0)
+VARIANTS = (1, 2, 4)
+
+
+@dataclasses.dataclass(frozen=True)
+class Setting:
+    """One row: a knob, its setting, and the configs it runs with."""
+
+    knob: str
+    label: str
+    problem: object  # diffsense.objective.ProblemConfig
+    solve: object  # diffsense.solve.SolveConfig
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """The dense hard grid on many variants: the yardstick of every row.
+
+    Attributes:
+        objective: the reference problem's objective (its `e_hard` is E_hard_ref).
+        dense: the grid search (r [deg], E_hard [m]).
+        variants: variants per scenario [-]; grid_step: grid spacing [deg].
+        compile_s, run_s: wall time of building the reference and of its grid [s].
+    """
+
+    objective: object
+    dense: object
+    problem: object  # its ProblemConfig
+    variants: int
+    grid_step: float
+    compile_s: float
+    run_s: float
+
+    @property
+    def r_star(self) -> float:
+        return float(self.dense.r[self.dense.best_index])
+
+    @property
+    def E_star(self) -> float:
+        return float(self.dense.E_hard[self.dense.best_index])
+
+
+@dataclasses.dataclass(frozen=True)
+class Row:
+    """One measured setting; times in s, r in deg, E in m."""
+
+    knob: str
+    label: str
+    shared: bool
+    compile_s: float
+    build_s: float
+    run_s: float
+    evaluations: int
+    r_star: float
+    E_hard: float  # E_hard(r*) on the row's own problem
+    E_hard_ref: float  # E_hard_ref(r*)
+    dr: float  # |r* - r*_ref|
+    dE_hard: float  # E_hard_ref(r*) - E_hard_ref(r*_ref)
+
+
+def default_config(model: str | None = None, scenarios: Sequence[str] | None = None,
+                   variants: int | None = None):
+    """configs/optimise/default.toml, optionally with other weights, scenarios or variant count."""
+    from diffsense import config as cfgio
+    from diffsense.optimise import OptimiseConfig
+
+    cfg = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
+    changes = {}
+    if model:
+        changes["model"] = model
+    if scenarios:
+        changes["scenarios"] = tuple(scenarios)
+    if variants:
+        changes["variants"] = variants
+    return cfgio.replace(cfg, problem=cfgio.replace(cfg.problem, **changes)) if changes else cfg
+
+
+def with_final_tau(solve_cfg, tau: float):
+    """The continuation scaled so that its last level is `tau` (what `--tau` does)."""
+    from diffsense import config as cfgio
+
+    last = solve_cfg.tau_schedule[-1]
+    return cfgio.replace(solve_cfg, tau_schedule=tuple(t * tau / last for t in solve_cfg.tau_schedule))
+
+
+def settings(cfg, quick: bool = False, mc_samples: Sequence[int] = MC_SAMPLES) -> list[Setting]:
+    """The default, then one knob changed at a time.
+
+    `quick`: one setting per knob, none of which compiles a new estimator (the hard estimator,
+    final tau 2, the other float type, 2 variants). `mc_samples`: the Monte-Carlo K of the
+    estimator knob (ignored when quick).
+    """
+    from diffsense import config as cfgio
+
+    p, s = cfg.problem, cfg.solve
+    mc = () if quick else tuple(mc_samples)
+    taus = (2.0,) if quick else TAUS
+    variants = (2,) if quick else VARIANTS
+    est = p.estimator
+    rows = [Setting("default", f"{est.kind}, tau {s.tau_schedule[-1]:g}, "
+                               f"{'float64' if p.float64 else 'float32'}, {p.variants} var", p, s)]
+    for k in mc:
+        rows.append(Setting("estimator", f"mc K={k}",
+                            cfgio.replace(p, estimator=cfgio.replace(est, kind="mc", samples=k)), s))
+    rows.append(Setting("estimator", "hard", cfgio.replace(p, estimator=cfgio.replace(est, kind="hard")), s))
+    for tau in taus:
+        rows.append(Setting("temperature", f"tau {tau:g}", p, with_final_tau(s, tau)))
+    other = "float32" if p.float64 else "float64"
+    rows.append(Setting("precision", other, cfgio.replace(p, float64=not p.float64),
+                        cfgio.replace(s, dtype=other)))
+    for n in variants:
+        if n != p.variants:
+            rows.append(Setting("variants", f"{n} var", cfgio.replace(p, variants=n), s))
+    return rows
+
+
+def _problem_key(problem_cfg):
+    """Problems that compile to the same programs: the hard estimator runs only the hard
+    program, which does not depend on the estimator's settings."""
+    from diffsense import config as cfgio
+    from diffsense.objective import EstimatorConfig
+
+    if problem_cfg.estimator.kind == "hard":
+        return cfgio.replace(problem_cfg, estimator=EstimatorConfig())
+    return problem_cfg
+
+
+def _interval(cfg) -> tuple[float, float]:
+    from diffsense.objective import check_interval, resolve_param
+
+    spec = resolve_param(cfg.problem.sensor, cfg.problem.param)
+    lo, hi = getattr(getattr(cfg.intervals, cfg.problem.sensor), spec.name)
+    check_interval(spec, lo, hi)
+    return float(lo), float(hi)
+
+
+def reference(cfg, predictor, variants: int, grid_step: float) -> Reference:
+    """The dense hard grid over the default interval on `variants` variants per scenario."""
+    from diffsense import config as cfgio
+    from diffsense._timing import CompileClock
+    from diffsense.objective import build_problem
+    from diffsense.solve import dense_grid_search
+
+    problem_cfg = cfgio.replace(_problem_key(cfg.problem), variants=variants)
+    with CompileClock() as clock:
+        problem = build_problem(problem_cfg, predictor=predictor)
+        dense = dense_grid_search(problem.objective.e_hard, _interval(cfg), grid_step)
+    return Reference(objective=problem.objective, dense=dense, problem=problem_cfg, variants=variants,
+                     grid_step=grid_step,
+                     compile_s=clock.compile_s, run_s=clock.run_s)
+
+
+def _search(obj, setting: Setting, cfg, interval):
+    """The main job's search on a built objective (diffsense.optimise's two paths)."""
+    import jax.numpy as jnp
+
+    from diffsense import config as cfgio
+    from diffsense.optimise import _hard_search
+    from diffsense.solve import solve
+
+    lo, hi = interval
+    solve_cfg = setting.solve
+    if setting.problem.estimator.kind == "hard":
+        return _hard_search(obj, lo, hi, None, cfgio.replace(cfg, solve=solve_cfg))
+    e2_soft, e_hard = obj.solver_fns(jnp.float64 if solve_cfg.dtype == "float64" else jnp.float32)
+    return solve(e2_soft, e_hard, interval, config=solve_cfg)
+
+
+def measure(cfg, rows: Sequence[Setting], predictor, ref: Reference,
+            progress: Callable[[str], None] = lambda _: None) -> list[Row]:
+    """Run every setting's search, timed, and evaluate its r* on the reference."""
+    from diffsense._timing import CompileClock
+    from diffsense.objective import build_problem
+
+    interval = _interval(cfg)
+    keys = [_problem_key(s.problem) for s in rows]
+    built: dict = {ref.problem: ref.objective}  # a row on the reference's own problem reuses it
+    out = []
+    for i, (setting, key) in enumerate(zip(rows, keys)):
+        progress(f"{setting.knob}: {setting.label}")
+        shared = key in built
+        compile_s = build_s = 0.0
+        if not shared:
+            with CompileClock() as clock:
+                built[key] = build_problem(key, predictor=predictor).objective
+            compile_s, build_s = clock.compile_s, clock.run_s
+        obj = built[key]
+        obj.forget()  # every row pays for its own evaluations
+        before = sum(obj.counts.values())
+        with CompileClock() as clock:
+            result = _search(obj, setting, cfg, interval)
+        evaluations = sum(obj.counts.values()) - before
+        e_ref = ref.objective.e_hard(result.r_star)
+        out.append(Row(
+            knob=setting.knob, label=setting.label, shared=shared,
+            compile_s=compile_s + clock.compile_s, build_s=build_s, run_s=clock.run_s,
+            evaluations=evaluations, r_star=result.r_star, E_hard=result.E_hard_star, E_hard_ref=e_ref,
+            dr=abs(result.r_star - ref.r_star), dE_hard=e_ref - ref.E_star,
+        ))
+        if key not in keys[i + 1:] and key != ref.problem:
+            del built[key]  # free its memory; no later row needs it
+            gc.collect()
+    return out
+
+
+def pareto(rows: Sequence[Row]) -> list[int]:
+    """Indices of the rows no other row beats on both run s and dE_hard, fastest first."""
+    front = [i for i, a in enumerate(rows)
+             if not any((b.run_s <= a.run_s and b.dE_hard <= a.dE_hard)
+                        and (b.run_s < a.run_s or b.dE_hard < a.dE_hard) for b in rows)]
+    return sorted(front, key=lambda i: rows[i].run_s)
+
+
+def table(rows: Sequence[Row], ref: Reference) -> str:
+    """The printed table, with the reference's line and the Pareto-optimal rows marked."""
+    front = set(pareto(rows))
+    lines = [
+        f"reference: dense hard grid every {ref.grid_step:g} deg on {ref.variants} variants per scenario "
+        f"({ref.dense.evaluations} evaluations, compile {ref.compile_s:.1f} s, run {ref.run_s:.1f} s): "
+        f"r*_ref = {ref.r_star:.2f} deg, E_hard_ref(r*_ref) = {ref.E_star:.4f} m",
+        f"{'knob':<12} {'setting':<32} {'compile s':>9} {'build s':>8} {'run s':>7} {'evals':>6} "
+        f"{'r* deg':>8} {'|r*-r*_ref|':>11} {'dE_hard m':>10} {'pareto':>6}",
+    ]
+    for i, r in enumerate(rows):
+        compile_s = f"{r.compile_s:.1f}" + ("*" if r.shared else " ")
+        build_s = "-" if r.shared else f"{r.build_s:.1f}"
+        lines.append(
+            f"{r.knob:<12} {r.label:<32} {compile_s:>9} {build_s:>8} {r.run_s:7.1f} {r.evaluations:>6} "
+            f"{r.r_star:8.2f} {r.dr:11.2f} {r.dE_hard:+10.4f} {'yes' if i in front else '':>6}"
+        )
+    lines.append("* reuses the default's compiled problem; a fresh process compiles as much as the default row")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--variants-ref", type=int, default=16, help="variants per scenario of the reference")
+    p.add_argument("--grid-step", type=float, default=1.0, help="reference grid spacing [deg]")
+    p.add_argument("--quick", action="store_true", help="one setting per knob (no Monte-Carlo row)")
+    p.add_argument("--mc-samples", default=",".join(map(str, MC_SAMPLES)),
+                   help="comma-separated Monte-Carlo K of the estimator knob")
+    p.add_argument("--model", default=None, help="predictor weights (default: the shipped ones)")
+    args = p.parse_args()
+
+    from diffsense import _cli
+    from diffsense.predict import load_predictor
+
+    _cli.setup_jax(float64=True, compilation_cache=False)  # compile times are cold
+    import jax
+
+    print(f"jax {jax.__version__} on {jax.default_backend()}, {os.cpu_count()} CPU cores, "
+          f"{platform.processor() or platform.machine()}")
+    t0 = time.perf_counter()
+
+    def progress(message: str) -> None:
+        print(f"[{time.perf_counter() - t0:7.1f} s] {message}", file=sys.stderr, flush=True)
+
+    cfg = default_config(args.model)
+    predictor = load_predictor(args.model)
+    progress(f"reference: {args.variants_ref} variants, grid every {args.grid_step:g} deg")
+    ref = reference(cfg, predictor, args.variants_ref, args.grid_step)
+    mc = tuple(int(k) for k in args.mc_samples.split(",") if k.strip())
+    rows = measure(cfg, settings(cfg, quick=args.quick, mc_samples=mc), predictor, ref, progress)
+    print(table(rows, ref))
+    print(f"total wall {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
