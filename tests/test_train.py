@@ -57,6 +57,8 @@ def test_resume_equals_uninterrupted(tmp_path, data):
     assert card["data"]["num_train_samples"] == 72 and card["data"]["num_val_samples"] == 24
     assert len(card["validation"]["rmse_m"]["cslstm"]) == 5
     assert len(card["validation"]["rmse_m"]["constant_velocity"]) == 5
+    axes = card["validation"]["rmse_by_axis_m"]["cslstm"]
+    np.testing.assert_allclose(np.hypot(axes["lon"], axes["lat"]), card["validation"]["rmse_m"]["cslstm"], atol=2e-4)
     assert all(np.isfinite(card["validation"]["rmse_m"]["cslstm"]))
     assert read_card(tmp_path / "full" / "w.msgpack") == card
     assert (tmp_path / "full" / "w.msgpack").stat().st_size < 2_000_000
@@ -93,6 +95,9 @@ def test_metrics_and_constant_velocity():
     np.testing.assert_allclose(rmse_per_second(fut_cv, fut_cv), np.zeros(5))
     shifted = fut_cv + np.array([3.0, 4.0])
     np.testing.assert_allclose(rmse_per_second(shifted, fut_cv), np.full(5, 5.0))
+    from diffsense.train._metrics import rmse_per_second_by_axis
+
+    assert rmse_per_second_by_axis(shifted, fut_cv) == {"lon": [3.0] * 5, "lat": [4.0] * 5}
 
 
 _nll_grad, _mse_grad, _bce_grad = (jax.jit(jax.value_and_grad(f)) for f in (nll, mse, class_bce))
@@ -162,6 +167,11 @@ def test_shipped_default_config_loads():
 
     cfg = load_default(TrainConfig, "train/default.toml")
     assert dataclasses.asdict(cfg.optim)["learning_rate"] == 1e-3 and cfg.optim.batch_size == 128
+    from diffsense.train._loop import position_scale
+
+    np.testing.assert_array_equal(position_scale(cfg.optim), [cfg.optim.lateral_scale_ft, cfg.optim.position_scale_ft])
+    one = dataclasses.replace(cfg.optim, lateral_scale_ft=0.0)
+    np.testing.assert_array_equal(position_scale(one), [cfg.optim.position_scale_ft] * 2)
 
 
 def test_position_scale_folds_exactly_into_the_plain_network():
@@ -174,7 +184,7 @@ def test_position_scale_folds_exactly_into_the_plain_network():
     shapes = param_shapes(False)
     arrays = {k: {kk: rng.uniform(-0.3, 0.3, size=vv) for kk, vv in v.items()} for k, v in shapes.items()}
     graphdef, params = nnx.split(model_from_params(False, arrays))
-    scale = 75.0
+    scale = np.array([7.5, 75.0])  # per model-frame component (lateral, longitudinal)
     trained, folded = nnx.merge(graphdef, params), nnx.merge(graphdef, fold_position_scale(params, scale))
     rng = np.random.default_rng(0)
     x, h = rng.normal(size=(4, 2)) * 100, rng.normal(size=(4, 128))

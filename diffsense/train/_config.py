@@ -34,7 +34,9 @@ class OptimConfig:
 
     position_scale_ft: positions enter the network in units of this many feet during training
     (1 = the reference); the scale is folded into the first and last layers when the weights are
-    written, so the result is a plain CS-LSTM in feet.
+    written, so the result is a plain CS-LSTM in feet. lateral_scale_ft: the same for the lateral
+    axis alone (0 = position_scale_ft): lateral offsets are ten times smaller than longitudinal
+    ones, and one scale for both leaves them near zero at the network's input.
     schedule: "constant" (the reference) or "cosine": the learning rate decays along a half cosine
     over all steps of the run to `final_lr_fraction` x learning_rate."""
 
@@ -45,6 +47,7 @@ class OptimConfig:
     nll_epochs: int = 3
     seed: int = 0
     position_scale_ft: float = 1.0
+    lateral_scale_ft: float = 0.0
     schedule: str = "constant"
     final_lr_fraction: float = 0.01
 
@@ -55,6 +58,8 @@ class OptimConfig:
             raise InputError(f"optim.final_lr_fraction must be in [0, 1], got {self.final_lr_fraction}")
         if not self.position_scale_ft > 0:
             raise InputError(f"optim.position_scale_ft must be > 0, got {self.position_scale_ft}")
+        if not self.lateral_scale_ft >= 0:
+            raise InputError(f"optim.lateral_scale_ft must be >= 0, got {self.lateral_scale_ft}")
         if not self.learning_rate > 0:
             raise InputError(f"optim.learning_rate must be > 0, got {self.learning_rate}")
         if self.batch_size < 1:

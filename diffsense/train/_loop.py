@@ -27,7 +27,7 @@ from diffsense.predict._model import N_LAT, N_LON, new_model
 from diffsense.train._config import OptimConfig, TrainConfig
 from diffsense.train._data import Samples, load_samples, split_by_simulation
 from diffsense.train._loss import class_bce, mse, nll
-from diffsense.train._metrics import constant_velocity_m, rmse_per_second
+from diffsense.train._metrics import constant_velocity_m, rmse_per_second, rmse_per_second_by_axis
 
 CHECKPOINT_NAME = "last.msgpack"
 
@@ -46,14 +46,24 @@ def _optimiser(optim: OptimConfig, total_steps: int) -> optax.GradientTransforma
     return optax.chain(optax.clip_by_global_norm(optim.clip_grad_norm), optax.adam(lr))
 
 
-def fold_position_scale(params: nnx.State, scale: float) -> nnx.State:
+def position_scale(optim: OptimConfig) -> np.ndarray:
+    """Feet per network unit of the two position components in the model frame, [2] =
+    (lateral, longitudinal)."""
+    lateral = optim.lateral_scale_ft or optim.position_scale_ft
+    return np.array([lateral, optim.position_scale_ft])
+
+
+def fold_position_scale(params: nnx.State, scale) -> nnx.State:
     """The parameters of the plain network equal to the one trained with positions in units of
-    `scale` feet: ip_emb(x / s) = (W / s) x + b and s * (W h + b) for the two mean outputs, exact
-    linear algebra, so the shipped weights are a standard CS-LSTM in feet."""
+    `scale` feet (a number, or [2] per model-frame component): ip_emb(x / s) = (W / s) x + b and
+    s * (W h + b) for the two mean outputs, exact linear algebra, so the shipped weights are a
+    standard CS-LSTM in feet."""
+    scale = np.broadcast_to(np.asarray(scale, np.float64), (2,))
     pure = jax.tree.map(lambda x: x, nnx.to_pure_dict(params))
-    pure["ip_emb"]["weight"] = pure["ip_emb"]["weight"] / scale
-    pure["op"]["weight"] = pure["op"]["weight"].at[:, :2].multiply(scale)
-    pure["op"]["bias"] = pure["op"]["bias"].at[:2].multiply(scale)
+    weight = pure["ip_emb"]["weight"]  # [2 inputs, E]
+    pure["ip_emb"]["weight"] = weight / scale.astype(weight.dtype)[:, None]
+    pure["op"]["weight"] = pure["op"]["weight"].at[:, :2].multiply(scale.astype(weight.dtype))
+    pure["op"]["bias"] = pure["op"]["bias"].at[:2].multiply(scale.astype(weight.dtype))
     folded = jax.tree.map(lambda x: x, params)
     nnx.replace_by_pure_dict(folded, pure)
     return folded
@@ -62,19 +72,20 @@ def fold_position_scale(params: nnx.State, scale: float) -> nnx.State:
 @functools.lru_cache(maxsize=8)  # one compiled step per (structure, recipe): resumes reuse it
 def _make_step(graphdef: nnx.GraphDef, optim: OptimConfig, total_steps: int, maneuvers: bool):
     tx = _optimiser(optim, total_steps)
-    scale = optim.position_scale_ft
+    scale = position_scale(optim)
 
     def loss_fn(params, batch, use_nll: bool):
         hist, fut, nbr_hist, nbr_slot, nbr_weight, lat, lon = batch
         model = nnx.merge(graphdef, params)
         # Positions enter in units of `scale` ft and the means leave in ft (see fold_position_scale).
-        enc = model.context_compact(hist / scale, nbr_hist / scale, nbr_slot, nbr_weight)
+        s = jnp.asarray(scale, hist.dtype)
+        enc = model.context_compact(hist / s, nbr_hist / s, nbr_slot, nbr_weight)
         if maneuvers:  # teacher forcing with the true manoeuvre, as the reference trains
             onehots = [jax.nn.one_hot(lat, N_LAT, dtype=enc.dtype), jax.nn.one_hot(lon, N_LON, dtype=enc.dtype)]
             raw = model.decode_raw(jnp.concatenate([enc, *onehots], axis=-1))
         else:
             raw = model.decode_raw(enc)
-        raw = jnp.concatenate([raw[..., :2] * scale, raw[..., 2:]], axis=-1)
+        raw = jnp.concatenate([raw[..., :2] * s, raw[..., 2:]], axis=-1)
         if not use_nll:
             return mse(raw, fut)
         loss = nll(raw, fut)
@@ -181,7 +192,7 @@ def train(
         params, opt_state = jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves])
         log(f"resumed from {ckpt} at step {start}/{total}")
 
-    scale = cfg.optim.position_scale_ft
+    scale = position_scale(cfg.optim)
     step_fn = _make_step(graphdef, cfg.optim, total, cfg.maneuvers)
     predict = _make_predict(graphdef)
     t0 = time.monotonic()
@@ -220,6 +231,7 @@ def train(
 
     params = fold_position_scale(params, scale)
     fut = _validate(predict, params, val_set, cfg.run.val_batch_size)
+    cv = constant_velocity_m(val_set.hist_m, cfg.data.cv_points)
     card = {
         "model": "CS-LSTM (Deo & Trivedi 2018), " + ("manoeuvre-based decoder" if cfg.maneuvers else "single-mode decoder"),
         "maneuvers": cfg.maneuvers,
@@ -242,8 +254,11 @@ def train(
             "horizon_s": [1, 2, 3, 4, 5],
             "rmse_m": {
                 "cslstm": [round(float(r), 4) for r in rmse_per_second(fut, val_set.fut_m)],
-                "constant_velocity": [round(float(r), 4) for r in rmse_per_second(
-                    constant_velocity_m(val_set.hist_m, cfg.data.cv_points), val_set.fut_m)],
+                "constant_velocity": [round(float(r), 4) for r in rmse_per_second(cv, val_set.fut_m)],
+            },
+            "rmse_by_axis_m": {  # road frame: lon forward, lat left
+                "cslstm": rmse_per_second_by_axis(fut, val_set.fut_m),
+                "constant_velocity": rmse_per_second_by_axis(cv, val_set.fut_m),
             },
         },
         "history": history,

@@ -14,6 +14,15 @@ def rmse_per_second(pred_m: np.ndarray, fut_m: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean(err2[:, SECOND_INDEX], axis=0))
 
 
+def rmse_per_second_by_axis(pred_m: np.ndarray, fut_m: np.ndarray) -> dict[str, list[float]]:
+    """{"lon": [5], "lat": [5]}: the RMSE at 1..5 s of each road-frame component alone [m]
+    (their squares add up to `rmse_per_second`'s)."""
+    err2 = (np.asarray(pred_m, np.float64) - np.asarray(fut_m, np.float64)) ** 2
+    per_axis = np.sqrt(np.mean(err2[:, SECOND_INDEX], axis=0))  # [5, 2]
+    return {"lon": [round(float(v), 4) for v in per_axis[:, 0]],
+            "lat": [round(float(v), 4) for v in per_axis[:, 1]]}
+
+
 def constant_velocity_m(hist_m: np.ndarray, points: int) -> np.ndarray:
     """[S, 25, 2] future of a constant-velocity model: the mean velocity of the last `points`
     history points, extrapolated from the last one (at the prediction instant)."""
