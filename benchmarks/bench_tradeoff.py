@@ -1,12 +1,14 @@
 """The speed/accuracy trade of the main job: each knob a user can turn, one at a time.
 
-    python benchmarks/bench_tradeoff.py [--variants-ref 16] [--grid-step 1] [--quick] [--model PATH]
+    python benchmarks/bench_tradeoff.py [--variants-ref 16] [--grid-step 1] [--quick]
+                                        [--mc-samples 1,4,16] [--mc-cost-only 64] [--model PATH]
 
 From the default of `python -m diffsense.optimise --param hfov --interval 30 180`
 (configs/optimise/default.toml: radar, six scenarios x 8 variants, mean-field estimator, final
 temperature multiplier 1, float64) one knob changes at a time: the estimator (Monte-Carlo with
-K = 1, 4, 16, 64; hard), the final temperature multiplier (0.5, 2, 4; the continuation keeps its
-shape, as `--tau` does), float32, and the variants per scenario (1, 2, 4). Each row runs the main
+K = 1, 4, 16 solved and K = 64 timed per evaluation only, see --mc-samples and --mc-cost-only;
+hard), the final temperature multiplier (0.5, 2, 4; the continuation keeps its shape, as `--tau`
+does), float32, and the variants per scenario (1, 2, 4). Each row runs the main
 job's search: the stepped sweep and the continuous solve (for the hard estimator, the sweep and
 an even hard grid in the best bracket, as diffsense.optimise does).
 
@@ -36,7 +38,11 @@ import time
 from collections.abc import Callable, Sequence
 
 KNOBS = ("default", "estimator", "temperature", "precision", "variants")
-MC_SAMPLES = (1, 4, 16, 64)
+MC_SAMPLES = (1, 4, 16)
+# Every soft evaluation with K samples runs the CS-LSTM K times: a full solve with K = 64 does not fit
+# a benchmark run on 2 cores, so by default only its cost per evaluation is measured
+# (--mc-samples 1,4,16,64 solves it too).
+MC_COST_ONLY = (64,)
 TAUS = (0.5, 2.0, 4.0)
 VARIANTS = (1, 2, 4)
 
@@ -236,9 +242,34 @@ def measure(cfg, rows: Sequence[Setting], predictor, ref: Reference,
             evaluations=evaluations, r_star=result.r_star, E_hard=result.E_hard_star, E_hard_ref=e_ref,
             dr=abs(result.r_star - ref.r_star), dE_hard=e_ref - ref.E_star,
         ))
+        progress(f"  run {clock.run_s:.1f} s, {evaluations} evaluations, r* {result.r_star:.2f} deg, "
+                 f"dE_hard {out[-1].dE_hard:+.4f} m")
         if key not in keys[i + 1:] and key != ref.problem:
             del built[key]  # free its memory; no later row needs it
             gc.collect()
+    return out
+
+
+def evaluation_cost(cfg, predictor, samples: Sequence[int]) -> list[tuple[str, float, float]]:
+    """(label, compile s, s per soft value-and-gradient) of the Monte-Carlo estimator with each K,
+    without a solve: for K too costly to solve (every soft evaluation runs the CS-LSTM K times)."""
+    from diffsense import config as cfgio
+    from diffsense._timing import CompileClock
+    from diffsense.objective import build_problem
+
+    lo, hi = _interval(cfg)
+    tau = cfg.solve.tau_schedule[-1]
+    out = []
+    for k in samples:
+        est = cfgio.replace(cfg.problem.estimator, kind="mc", samples=k)
+        with CompileClock() as clock:
+            obj = build_problem(cfgio.replace(cfg.problem, estimator=est), predictor=predictor).objective
+            obj.value_and_grad(0.5 * (lo + hi), tau)  # compiles
+        t0 = time.perf_counter()
+        obj.value_and_grad(0.5 * (lo + hi) + 1.0, tau)  # a new point: not memoised
+        out.append((f"mc K={k}", clock.compile_s, time.perf_counter() - t0))
+        del obj
+        gc.collect()
     return out
 
 
@@ -277,7 +308,9 @@ def main() -> None:
     p.add_argument("--grid-step", type=float, default=1.0, help="reference grid spacing [deg]")
     p.add_argument("--quick", action="store_true", help="one setting per knob (no Monte-Carlo row)")
     p.add_argument("--mc-samples", default=",".join(map(str, MC_SAMPLES)),
-                   help="comma-separated Monte-Carlo K of the estimator knob")
+                   help="comma-separated Monte-Carlo K of the estimator knob (solved)")
+    p.add_argument("--mc-cost-only", default=",".join(map(str, MC_COST_ONLY)),
+                   help="comma-separated K whose cost per soft evaluation is measured, not solved")
     p.add_argument("--model", default=None, help="predictor weights (default: the shipped ones)")
     args = p.parse_args()
 
@@ -300,7 +333,16 @@ def main() -> None:
     ref = reference(cfg, predictor, args.variants_ref, args.grid_step)
     mc = tuple(int(k) for k in args.mc_samples.split(",") if k.strip())
     rows = measure(cfg, settings(cfg, quick=args.quick, mc_samples=mc), predictor, ref, progress)
+    cost_only = tuple(int(k) for k in args.mc_cost_only.split(",") if k.strip())
+    if cost_only:
+        progress(f"cost per evaluation of mc K={args.mc_cost_only}")
+    costs = evaluation_cost(cfg, predictor, cost_only)
     print(table(rows, ref))
+    if costs:
+        print("\nnot solved (cost per soft evaluation only; a solve runs the evaluations column's count):")
+        print(f"{'estimator':<12} {'compile s':>9} {'s per soft value-and-gradient':>30}")
+        for label, compile_s, eval_s in costs:
+            print(f"{label:<12} {compile_s:9.1f} {eval_s:30.1f}")
     print(f"total wall {time.perf_counter() - t0:.0f} s")
 
 
