@@ -73,7 +73,9 @@ def test_resume_equals_uninterrupted(tmp_path, data):
 def test_single_mode_trains_and_resume_needs_a_checkpoint(tmp_path, data):
     with pytest.raises(InputError, match="no checkpoint"):
         train(_cfg(tmp_path, data, "none"), resume=True, progress=False)
-    card = train(_cfg(tmp_path, data, "single", mse_epochs=1, nll_epochs=0), progress=False)
+    # MSE in the scaled units with a lateral scale of its own (the default recipe's options).
+    card = train(_cfg(tmp_path, data, "single", mse_epochs=1, nll_epochs=0, position_scale_ft=100.0,
+                      lateral_scale_ft=20.0, mse_in_scaled_units=True), progress=False)
     assert card["maneuvers"] is False and card["steps"] == 72 // 16
     assert all(np.isfinite(card["validation"]["rmse_m"]["cslstm"]))
 
@@ -135,6 +137,30 @@ def test_cli_bad_config_is_one_line(tmp_path):
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "not a traffic dataset" in proc.stderr, proc.stderr
     assert proc.stderr.strip().count("\n") == 0
+
+
+def test_mse_in_scaled_units_weighs_each_axis_in_its_own_unit(data):
+    from flax import nnx
+
+    from diffsense.predict._model import new_model
+    from diffsense.train._config import OptimConfig
+    from diffsense.train._loop import _make_step
+
+    samples, _ = load_samples(data)
+    batch = tuple(np.asarray(x[:8]) for x in (samples.hist, samples.fut, samples.nbr_hist, samples.nbr_slot,
+                                              samples.nbr_weight, samples.lat, samples.lon))
+    graphdef, params = nnx.split(new_model(False, 0))
+    feet = OptimConfig(position_scale_ft=100.0, lateral_scale_ft=20.0)
+    scaled = dataclasses.replace(feet, mse_in_scaled_units=True)
+    from diffsense.train._loop import _optimiser
+
+    losses = {}
+    for name, optim in (("feet", feet), ("scaled", scaled)):
+        step = _make_step(graphdef, optim, 10, False)
+        losses[name] = float(step(params, _optimiser(optim, 10).init(params), batch, False)[2])
+    # The same network output: the scaled loss is the feet loss with each axis divided by its
+    # scale squared, so it lies between the two bounds.
+    assert losses["feet"] / 100.0**2 < losses["scaled"] < losses["feet"] / 20.0**2
 
 
 def test_learning_rate_schedules():

@@ -37,6 +37,9 @@ class OptimConfig:
     written, so the result is a plain CS-LSTM in feet. lateral_scale_ft: the same for the lateral
     axis alone (0 = position_scale_ft): lateral offsets are ten times smaller than longitudinal
     ones, and one scale for both leaves them near zero at the network's input.
+    mse_in_scaled_units: the MSE epochs measure the error in the scaled units (each axis in its
+    own, so lateral errors weigh as much as longitudinal ones ten times their size) instead of
+    in feet (the reference).
     schedule: "constant" (the reference) or "cosine": the learning rate decays along a half cosine
     over all steps of the run to `final_lr_fraction` x learning_rate."""
 
@@ -48,6 +51,7 @@ class OptimConfig:
     seed: int = 0
     position_scale_ft: float = 1.0
     lateral_scale_ft: float = 0.0
+    mse_in_scaled_units: bool = False
     schedule: str = "constant"
     final_lr_fraction: float = 0.01
 

@@ -85,6 +85,8 @@ def _make_step(graphdef: nnx.GraphDef, optim: OptimConfig, total_steps: int, man
             raw = model.decode_raw(jnp.concatenate([enc, *onehots], axis=-1))
         else:
             raw = model.decode_raw(enc)
+        if not use_nll and optim.mse_in_scaled_units:
+            return mse(raw, fut / s)
         raw = jnp.concatenate([raw[..., :2] * s, raw[..., 2:]], axis=-1)
         if not use_nll:
             return mse(raw, fut)
