@@ -96,6 +96,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mc-samples", type=int, help="Monte-Carlo samples K (--estimator mc)")
     p.add_argument("--tau", type=float, help="temperature multiplier of the final continuation level")
     p.add_argument("--seed", type=int, help="seed of scenes, noise and Monte-Carlo draws")
+    p.add_argument("--dense-check", type=float, metavar="STEP",
+                   help="also evaluate E_hard every STEP (parameter units, e.g. 0.5 deg) over the "
+                   "interval and report whether r* lies in the basin of the best dense point")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quiet", action="store_true", help="print only the summary table")
     return p
@@ -165,6 +168,33 @@ def _interval(args, cfg, sensor: str, spec) -> tuple[float, float]:
         lo, hi = getattr(getattr(cfg.intervals, sensor), spec.name)
     check_interval(spec, lo, hi)
     return float(lo), float(hi)
+
+
+def _check_dense_step(step: float | None, intervals: list[tuple[float, float]]) -> None:
+    if step is None:
+        return
+    if not (math.isfinite(step) and step > 0):
+        raise InputError(f"--dense-check must be a positive step, got {step}")
+    for lo, hi in intervals:
+        if (hi - lo) / step > 100_000:
+            raise InputError(f"--dense-check {step:g} makes over 100,000 points on [{lo:g}, {hi:g}]")
+
+
+def _dense_check(obj, result, lo: float, hi: float, step: float) -> dict[str, Any]:
+    """E_hard on a dense grid and the basin check of r* (issue: r* in the best dense basin)."""
+    from diffsense.solve import basin_check, dense_grid_search
+
+    dense = dense_grid_search(obj.e_hard, (lo, hi), step)
+    why = basin_check(dense, result.r_star, result.E_hard_star, result.bracket)
+    i = dense.best_index
+    return {
+        "step": step, "evaluations": dense.evaluations, "wall_s": dense.wall_s,
+        "r_best": float(dense.r[i]), "E_hard_best": float(dense.E_hard[i]),
+        "basin": list(dense.basin()), "in_basin": why is None,
+        "E_hard_star_minus_best": result.E_hard_star - float(dense.E_hard[i]),
+        "verdict": why or f"r* lies in the basin {list(dense.basin())} of the best dense point "
+                          f"r={float(dense.r[i]):.6g}",
+    }
 
 
 def _hard_search(obj, lo: float, hi: float, steps, cfg):
@@ -238,12 +268,17 @@ def _run_one(sensor: str, args, cfg, out: Path, progress: _Progress, predictor) 
         cols = [v for v in range(1, present.size) if present[v]]  # the ego always knows itself
         roles = [ROLE_NAMES[int(first.role[v])] for v in cols]
     plot_counts = {k: obj.counts[k] - solve_counts[k] for k in obj.counts}
+    extra: dict[str, Any] = {}
+    if args.dense_check is not None:
+        progress(f"{sensor}: dense hard grid every {args.dense_check:g} {spec.unit} (--dense-check)")
+        extra["dense_check"] = _dense_check(obj, result, lo, hi, args.dense_check)
+        result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + extra["dense_check"]["verdict"]))
     content = report.result_dict(
         result, param=spec.name, sensor=sensor, r_unit=spec.unit,
         wall_s={"compile": clock.compile_s, "run": clock.run_s},
         config=cfgio.to_dict(cfg) | {"interval": [lo, hi], "steps": list(steps) if steps else None},
         extra={"objective_programs_run": solve_counts, "plot_programs_run": plot_counts,
-               "scenarios": problem.scenario_names, "unit": spec.unit},
+               "scenarios": problem.scenario_names, "unit": spec.unit} | extra,
     )
     out.mkdir(parents=True, exist_ok=True)
     report.write_result_json(out / "result.json", content)
@@ -267,6 +302,8 @@ def main(argv: list[str] | None = None) -> int:
         _interval(args, cfg, sensor, resolve_param(sensor, cfg.problem.param))
     if args.steps:
         _number_list(args.steps, "--steps")
+    _check_dense_step(args.dense_check, [_interval(args, cfg, s, resolve_param(s, cfg.problem.param))
+                                         for s in sensors])
     from diffsense.scene import load_scenario
 
     for name in cfg.problem.scenarios:

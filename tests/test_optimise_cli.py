@@ -50,6 +50,8 @@ def _run(argv, capsys) -> tuple[int, str]:
         (["--steps", "30,abc"], "--steps must be comma-separated numbers"),
         (["--tau", "-1"], "--tau must be a positive number"),
         (["--model", "/nonexistent/weights.msgpack"], "/nonexistent/weights.msgpack"),
+        (["--dense-check", "0"], "--dense-check must be a positive step"),
+        (["--dense-check", "1e-6"], "over 100,000 points"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_nothing_written(args, needle, tmp_path, capsys):
@@ -93,7 +95,7 @@ def test_real_process_prints_no_traceback(tmp_path):
 def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
     out = tmp_path / "run"
     code, _ = _run(["--model", str(weights), "--scenarios", "sc05", "--variants", "1",
-                    "--steps", "30,105,180", "--out", str(out), "--quiet"], capsys)
+                    "--steps", "30,105,180", "--dense-check", "15", "--out", str(out), "--quiet"], capsys)
     assert code == 0
     result = json.loads((out / "result.json").read_text())
     for key in ("param", "interval", "sensor", "r_star", "E_soft_star", "E_hard_star", "sweep",
@@ -104,6 +106,12 @@ def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
     assert result["E_hard_star"] <= min(p["E_hard"] for p in result["sweep"])
     assert result["evaluations"]["objective"] + result["evaluations"]["gradient"] <= 20
     assert set(result["wall_s"]) >= {"compile", "run"}
+    dense = result["dense_check"]  # 30, 45, ..., 180: 11 hard evaluations
+    assert dense["evaluations"] == 11 and dense["step"] == 15.0
+    assert dense["E_hard_best"] <= min(p["E_hard"] for p in result["sweep"]) + 1e-12
+    assert dense["E_hard_star_minus_best"] == pytest.approx(result["E_hard_star"] - dense["E_hard_best"])
+    assert any(n == "dense check: " + dense["verdict"] for n in result["notes"])
+    assert dense["in_basin"] == dense["verdict"].startswith("r* lies in the basin")
     for name in ("objective.png", "rmse_horizon.png", "detections.png"):
         assert (out / name).stat().st_size > 1000
     assert sorted(p.name for p in out.iterdir()) == ["detections.png", "objective.png", "result.json",
