@@ -128,19 +128,21 @@ def with_final_tau(solve_cfg, tau: float):
     return cfgio.replace(solve_cfg, tau_schedule=tuple(t * tau / last for t in solve_cfg.tau_schedule))
 
 
-def settings(cfg, quick: bool = False, mc_samples: Sequence[int] = MC_SAMPLES) -> list[Setting]:
+def settings(cfg, quick: bool = False, mc_samples: Sequence[int] = MC_SAMPLES,
+             taus: Sequence[float] = TAUS, variants: Sequence[int] = VARIANTS) -> list[Setting]:
     """The default, then one knob changed at a time.
 
     `quick`: one setting per knob, none of which compiles a new estimator (the hard estimator,
-    final tau 2, the other float type, 2 variants). `mc_samples`: the Monte-Carlo K of the
-    estimator knob (ignored when quick).
+    final tau 2, the other float type, 2 variants). Otherwise `mc_samples`, `taus` and
+    `variants` are the Monte-Carlo K, final temperature multipliers and variants per scenario
+    tried (besides the hard estimator and the other float type).
     """
     from diffsense import config as cfgio
 
     p, s = cfg.problem, cfg.solve
     mc = () if quick else tuple(mc_samples)
-    taus = (2.0,) if quick else TAUS
-    variants = (2,) if quick else VARIANTS
+    taus = (2.0,) if quick else tuple(taus)
+    variants = (2,) if quick else tuple(variants)
     est = p.estimator
     rows = [Setting("default", f"{est.kind}, tau {s.tau_schedule[-1]:g}, "
                                f"{'float64' if p.float64 else 'float32'}, {p.variants} var", p, s)]
