@@ -38,7 +38,8 @@ def execute(path: Path, fast: bool, timeout_s: int = 3600, write: bool = True) -
     os.environ[FAST_ENV] = "1" if fast else "0"  # the kernel inherits this process's environment
     try:
         t0 = time.perf_counter()
-        nbclient.NotebookClient(nb, timeout=timeout_s, kernel_name="python3",
+        # A kernel on a loaded 2-core machine can take over nbclient's default 60 s to start.
+        nbclient.NotebookClient(nb, timeout=timeout_s, startup_timeout=300, kernel_name="python3",
                                 resources={"metadata": {"path": str(HERE)}}).execute()
         wall = time.perf_counter() - t0
     finally:
