@@ -6,7 +6,7 @@ On one objective E(r) (the main job's: diffsense.objective.build_problem), every
 searches the same interval and is judged by the hard E of its answer:
 
     continuous solve        diffsense.solve.solve: the paper's sweep, then optimistix refinement
-    paper grid (hard)       the sweep's steps alone (30, 60, ..., 180 deg for HFOV), best E_hard
+    paper/stepped grid      the sweep's steps alone, hard (the paper's 30, 60, ..., 180 deg on HFOV 30-180)
     dense grid (hard)       diffsense.solve.dense_grid_search every STEP (see --problems)
     Brent on E_hard/E_soft  scipy.optimize.minimize_scalar(method="bounded"), derivative-free
     Bayesian (optuna TPE)   optional extra `baseline` (skipped with a line when not installed)
@@ -214,7 +214,7 @@ def optuna_available() -> bool:
 def compare(problem, setting: Setting) -> Comparison:
     """Run every method on `problem.objective` (see the module docstring)."""
     from diffsense._timing import CompileClock
-    from diffsense.solve import DenseGrid, default_steps, dense_grid_search, solve
+    from diffsense.solve import PAPER_HFOV_STEPS_DEG, DenseGrid, default_steps, dense_grid_search, solve
 
     obj = problem.objective
     lo, hi = setting.interval
@@ -246,7 +246,8 @@ def compare(problem, setting: Setting) -> Comparison:
         e = [obj.e_hard(float(r)) for r in steps]
         return float(steps[int(np.argmin(e))])
 
-    kind = "paper" if setting.param.startswith("hfov") else "stepped"
+    paper = setting.param.startswith("hfov") and tuple(steps) == PAPER_HFOV_STEPS_DEG
+    kind = "paper" if paper else "stepped"
     runs.append(rec.run(f"{kind} grid, {len(steps)} steps (hard)", grid))
     dense: dict[str, DenseGrid] = {}
 
