@@ -1,7 +1,8 @@
 """The speed/accuracy trade of the main job: each knob a user can turn, one at a time.
 
     python benchmarks/bench_tradeoff.py [--variants-ref 16] [--grid-step 1] [--quick]
-        [--mc-samples 1,4] [--mc-cost-only 16,64] [--model PATH] [--scenarios sc01,...] [--variants 8]
+        [--mc-samples 1,4] [--mc-cost-only 16,64] [--taus 0.5,2,4] [--variant-counts 1,2,4]
+        [--model PATH] [--scenarios sc01,...] [--variants 8]
 
 From the default of `python -m diffsense.optimise --param hfov --interval 30 180`
 (configs/optimise/default.toml: radar, six scenarios x 8 variants, mean-field estimator, final
@@ -313,6 +314,10 @@ def main() -> None:
                    help="comma-separated Monte-Carlo K of the estimator knob (solved)")
     p.add_argument("--mc-cost-only", default=",".join(map(str, MC_COST_ONLY)),
                    help="comma-separated K whose cost per soft evaluation is measured, not solved")
+    p.add_argument("--taus", default=",".join(f"{t:g}" for t in TAUS),
+                   help="comma-separated final temperature multipliers tried besides the default's")
+    p.add_argument("--variant-counts", default=",".join(map(str, VARIANTS)),
+                   help="comma-separated variants per scenario tried besides the default's")
     p.add_argument("--model", default=None, help="predictor weights (default: the shipped ones)")
     p.add_argument("--scenarios", default=None, help="comma-separated scenarios (default: the config's six)")
     p.add_argument("--variants", type=int, default=None, help="variants per scenario of the default (config: 8)")
@@ -337,7 +342,10 @@ def main() -> None:
     progress(f"reference: {args.variants_ref} variants, grid every {args.grid_step:g} deg")
     ref = reference(cfg, predictor, args.variants_ref, args.grid_step)
     mc = tuple(int(k) for k in args.mc_samples.split(",") if k.strip())
-    rows = measure(cfg, settings(cfg, quick=args.quick, mc_samples=mc), predictor, ref, progress)
+    taus = tuple(float(t) for t in args.taus.split(",") if t.strip())
+    counts = tuple(int(n) for n in args.variant_counts.split(",") if n.strip())
+    rows = measure(cfg, settings(cfg, quick=args.quick, mc_samples=mc, taus=taus, variants=counts),
+                   predictor, ref, progress)
     cost_only = tuple(int(k) for k in args.mc_cost_only.split(",") if k.strip())
     if cost_only:
         progress(f"cost per evaluation of mc K={args.mc_cost_only}")
