@@ -202,14 +202,11 @@ def _search(obj, setting: Setting, cfg, interval):
     """The main job's search on a built objective (diffsense.optimise's two paths)."""
     import jax.numpy as jnp
 
-    from diffsense import config as cfgio
-    from diffsense.optimise import _hard_search
-    from diffsense.solve import solve
+    from diffsense.solve import hard_grid_solve, solve
 
-    lo, hi = interval
     solve_cfg = setting.solve
     if setting.problem.estimator.kind == "hard":
-        return _hard_search(obj, lo, hi, None, cfgio.replace(cfg, solve=solve_cfg))
+        return hard_grid_solve(obj.e_hard, interval, max_evaluations=solve_cfg.max_evaluations)
     e2_soft, e_hard = obj.solver_fns(jnp.float64 if solve_cfg.dtype == "float64" else jnp.float32)
     return solve(e2_soft, e_hard, interval, config=solve_cfg)
 

@@ -197,33 +197,12 @@ def _dense_check(obj, result, lo: float, hi: float, step: float) -> dict[str, An
     }
 
 
-def _hard_search(obj, lo: float, hi: float, steps, cfg):
-    """The hard estimator has no gradient: the sweep, then a dense hard grid in the best bracket
-    with the continuous solve's evaluation budget."""
-    from diffsense.solve import SolveResult, bracket_around, best_step, check_steps, default_steps, sweep
-
-    grid = check_steps(default_steps(lo, hi) if steps is None else steps, lo, hi)
-    points = sweep(obj.e_hard, lambda r, tau: obj.e_hard(r) ** 2, grid)
-    k = best_step(points)
-    b_lo, b_hi = bracket_around(points, k, lo, hi)
-    inner = [float(r) for r in np.linspace(b_lo, b_hi, cfg.solve.max_evaluations + 2)[1:-1]]
-    e_best, r_best = min([(points[k].E_hard, points[k].r)] + [(obj.e_hard(r), r) for r in inner])
-    return SolveResult(
-        r_star=r_best, E_soft_star=e_best, E_hard_star=e_best, sweep=points,
-        evaluations={"objective": len(inner), "gradient": 0}, on_bound=r_best in (lo, hi),
-        bracket=(b_lo, b_hi), tau_schedule=(), levels=(),
-        notes=("hard estimator: no gradient; r* is the best of the sweep and an even hard grid "
-               f"of {len(inner)} points inside the best bracket",),
-        interval=(lo, hi), wall_s={"sweep": 0.0, "solve": 0.0},
-    )
-
-
 def _run_one(sensor: str, args, cfg, out: Path, progress: _Progress, predictor) -> dict[str, Any]:
     from diffsense import report
     from diffsense._timing import CompileClock
     from diffsense.objective import build_problem, resolve_param
     from diffsense.scene import ROLE_NAMES
-    from diffsense.solve import solve
+    from diffsense.solve import hard_grid_solve, solve
 
     problem_cfg = cfgio.replace(cfg.problem, sensor=sensor)
     spec = resolve_param(sensor, problem_cfg.param)
@@ -238,7 +217,7 @@ def _run_one(sensor: str, args, cfg, out: Path, progress: _Progress, predictor) 
         progress(f"{sensor}: stepped sweep and {'hard grid' if hard_only else 'continuous solve'} "
                  f"of {spec.name} over [{lo:g}, {hi:g}] {spec.unit}")
         if hard_only:
-            result = _hard_search(obj, lo, hi, steps, cfg)
+            result = hard_grid_solve(obj.e_hard, (lo, hi), steps=steps, max_evaluations=cfg.solve.max_evaluations)
         else:
             e2_soft, e_hard = obj.solver_fns(jnp.float64 if cfg.solve.dtype == "float64" else jnp.float32)
             result = solve(e2_soft, e_hard, (lo, hi), steps=steps, config=cfg.solve)

@@ -129,3 +129,16 @@ def test_config_file_values_reach_the_run_and_flags_override_them(tmp_path):
     assert cfg.problem.variants == 3 and cfg.problem.prediction_stride_frames == 6
     cfg = _load_config(_parser().parse_args(["--config", str(path), "--variants", "5", "--fill", "zero"]))
     assert cfg.problem.variants == 5 and cfg.problem.fill == "zero" and cfg.problem.prediction_stride_frames == 6
+
+
+@pytest.mark.slow
+def test_hard_estimator_searches_the_best_bracket(weights, tmp_path, capsys):
+    out = tmp_path / "hard"
+    code, _ = _run(["--model", str(weights), "--scenarios", "sc05", "--variants", "1", "--estimator", "hard",
+                    "--steps", "30,105,180", "--out", str(out), "--quiet"], capsys)
+    assert code == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["evaluations"] == {"objective": 20, "gradient": 0}
+    assert result["E_hard_star"] <= min(p["E_hard"] for p in result["sweep"])
+    assert result["bracket"][0] <= result["r_star"] <= result["bracket"][1]
+    assert result["notes"][0].startswith("hard estimator: no gradient")

@@ -274,3 +274,24 @@ def test_basin_includes_plateaus():
     a, b = dense.basin()
     # The best plateau [1.25, 1.30) and the rising steps on both sides belong to the basin.
     assert a == pytest.approx(1.0) and b == pytest.approx(1.6)
+
+
+def test_hard_grid_solve_searches_the_best_bracket_with_the_budget():
+    from diffsense.solve import hard_grid_solve
+
+    calls = []
+    _, eh = bowl(1.3)
+
+    def counted(r):
+        calls.append(float(r))
+        return eh(r)
+
+    res = hard_grid_solve(counted, (LO, HI), max_evaluations=10)
+    steps = [p.r for p in res.sweep]
+    assert len(calls) == len(steps) * 2 + 10  # sweep (hard, and E_soft = E_hard^2) + inner grid
+    assert res.evaluations == {"objective": 10, "gradient": 0}
+    # The inner grid is 10 even points strictly inside the bracket of the best step (60 or 90 deg).
+    assert all(res.bracket[0] < r < res.bracket[1] for r in calls[-10:])
+    assert res.E_hard_star <= min(p.E_hard for p in res.sweep)
+    assert abs(res.r_star - 1.3) <= (res.bracket[1] - res.bracket[0]) / 11
+    assert float(eh(res.r_star)) == pytest.approx(res.E_hard_star)

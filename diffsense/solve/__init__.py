@@ -6,6 +6,7 @@
     argmin, argmin_derivative    dr*/dtheta by the implicit function theorem (optimistix
                                  ImplicitAdjoint, or the explicit formula); zero on a bound
     dense_grid_search, basin_check   the brute-force baseline and its basin cross-check
+    hard_grid_solve              the hard estimator's search (no gradient): sweep + inner grid
 
 Objective protocol: `e2_soft(r, tau) -> E^2 [m^2]` (jax-differentiable in r; tau = 1 is the
 sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, both pure.
@@ -14,6 +15,7 @@ sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, 
 from diffsense.solve._bracketed import BracketedSecant
 from diffsense.solve._continuous import LevelResult, SolveConfig, SolveResult, solve
 from diffsense.solve._dense import DenseGrid, basin_check, dense_grid_search
+from diffsense.solve._hard_grid import hard_grid_solve
 from diffsense.solve._implicit import argmin, argmin_derivative
 from diffsense.solve._steps import (
     PAPER_HFOV_STEPS_DEG,
@@ -43,6 +45,7 @@ __all__ = [
     "check_steps",
     "default_steps",
     "dense_grid_search",
+    "hard_grid_solve",
     "solve",
     "sweep",
 ]
