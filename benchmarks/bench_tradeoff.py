@@ -105,12 +105,21 @@ class Row:
 
 
 def default_config(model: str | None = None, scenarios: Sequence[str] | None = None,
-                   variants: int | None = None):
-    """configs/optimise/default.toml, optionally with other weights, scenarios or variant count."""
+                   variants: int | None = None, interval: tuple[float, float] | None = None):
+    """configs/optimise/default.toml, optionally with other weights, scenarios, variant count or
+    interval of the parameter [its units]."""
     from diffsense import config as cfgio
+    from diffsense.objective import check_interval, resolve_param
     from diffsense.optimise import OptimiseConfig
 
     cfg = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
+    if interval is not None:
+        spec = resolve_param(cfg.problem.sensor, cfg.problem.param)
+        lo, hi = float(interval[0]), float(interval[1])
+        check_interval(spec, lo, hi)
+        per_sensor = getattr(cfg.intervals, cfg.problem.sensor)
+        cfg = cfgio.replace(cfg, intervals=cfgio.replace(
+            cfg.intervals, **{cfg.problem.sensor: cfgio.replace(per_sensor, **{spec.name: (lo, hi)})}))
     changes = {}
     if model:
         changes["model"] = model
@@ -318,6 +327,8 @@ def main() -> None:
     p.add_argument("--model", default=None, help="predictor weights (default: the shipped ones)")
     p.add_argument("--scenarios", default=None, help="comma-separated scenarios (default: the config's six)")
     p.add_argument("--variants", type=int, default=None, help="variants per scenario of the default (config: 8)")
+    p.add_argument("--interval", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="the parameter's interval (default: the config's, HFOV 30 180 deg)")
     args = p.parse_args()
 
     from diffsense import _cli
@@ -334,7 +345,7 @@ def main() -> None:
         print(f"[{time.perf_counter() - t0:7.1f} s] {message}", file=sys.stderr, flush=True)
 
     scenarios = [x.strip() for x in args.scenarios.split(",") if x.strip()] if args.scenarios else None
-    cfg = default_config(args.model, scenarios, args.variants)
+    cfg = default_config(args.model, scenarios, args.variants, args.interval)
     predictor = load_predictor(args.model)
     progress(f"reference: {args.variants_ref} variants, grid every {args.grid_step:g} deg")
     ref = reference(cfg, predictor, args.variants_ref, args.grid_step)

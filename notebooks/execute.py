@@ -58,13 +58,15 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("prefixes", nargs="*", help="notebook name prefixes (default: all)")
     p.add_argument("--fast", action="store_true", help="small shapes; outputs not written back")
+    p.add_argument("--cell-timeout", type=int, default=3600, metavar="S",
+                   help="longest a single cell may run [s] (default 3600)")
     args = p.parse_args()
     paths = notebooks(args.prefixes)
     if not paths:
         print(f"error: no notebook matches {args.prefixes}", file=sys.stderr)
         return 2
     for path in paths:
-        wall = execute(path, fast=args.fast, write=not args.fast)
+        wall = execute(path, fast=args.fast, timeout_s=args.cell_timeout, write=not args.fast)
         print(f"{path.name}: executed in {wall:.1f} s" + (" (fast mode, not written)" if args.fast else ""))
     return 0
 
