@@ -99,6 +99,27 @@ def test_monte_carlo_memory_does_not_grow_with_samples():
     assert scratch[32] < 2 * scratch[2], scratch
 
 
+@pytest.mark.parametrize("kind", ["mean-field", "mc"])
+def test_sq_error_by_variant_and_step_adds_up_to_the_objective(kind):
+    scenes, scenario = toy_scenes(n=2)
+    frames = prediction_frames(scenes.num_frames)[:4]
+    obj = make_objective(scenes, scenario, frames, toy_detect(), toy_predict, TOY_GAIN, fill="interp",
+                         estimator=EstimatorConfig(kind=kind, samples=3, relax_temperature=0.3))
+    data, r, tau = obj.data, 40.0, 1.0
+    sq = jax.jit(obj.traced_sq_error)(r, tau, data)
+    assert sq.shape == (scenario.shape[0], 25) and np.all(np.isfinite(sq)) and np.all(sq >= 0.0)
+
+    def weighted(r_, w):
+        return jnp.sum(w * obj.traced_sq_error(r_, tau, data)) / (jnp.sum(data.weight) * 25)
+
+    w = jnp.broadcast_to(data.weight[:, None], sq.shape)
+    value, grad = obj.value_and_grad(r, tau)
+    np.testing.assert_allclose(float(jax.jit(weighted)(r, w)), value, rtol=1e-12)
+    # d/dw of dE^2/dr: each (variant, step)'s share of the gradient; the shares add up to it.
+    shares = jax.jit(jax.grad(jax.grad(weighted, argnums=0), argnums=1))(r, w)
+    np.testing.assert_allclose(float(jnp.sum(shares * w)), grad, rtol=1e-10, atol=1e-14)
+
+
 def test_estimator_config_rejects_bad_values():
     from diffsense.errors import InputError
 
