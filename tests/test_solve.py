@@ -178,6 +178,26 @@ def test_hard_polish_finds_a_better_hard_point_next_to_the_soft_optimum():
     assert used <= plain_used + SolveConfig().hard_polish + 1
 
 
+def test_reserved_polish_is_not_starved_by_a_hungry_continuation():
+    # A rippled bowl whose hard objective is 0.05 m better only within 0.01 rad of 1.385, just
+    # beside the soft optimum (~1.37). A tight tolerance makes the continuation spend the budget.
+    e2, eh_rippled = ripple(1.3)
+
+    def eh(r):
+        return eh_rippled(r) + 0.05 * (jnp.abs(jnp.asarray(r) - 1.385) > 0.01)
+
+    cfg = SolveConfig(xtol_rel=1e-6)
+    hungry = solve(e2, eh, (LO, HI), config=cfg)
+    assert not any(n.startswith("hard polish") for n in hungry.notes)  # nothing left for it
+    reserved = solve(e2, eh, (LO, HI), config=SolveConfig(xtol_rel=1e-6, reserve_polish=True))
+    assert any(n.startswith("hard polish") for n in reserved.notes)
+    assert abs(reserved.r_star - 1.385) <= 0.01
+    assert reserved.E_hard_star < hungry.E_hard_star - 0.04
+    soft_levels = sum(level.gradient_evaluations for level in reserved.levels)
+    assert soft_levels <= BUDGET - 2 - cfg.hard_polish
+    assert reserved.evaluations["objective"] + reserved.evaluations["gradient"] <= BUDGET
+
+
 def test_float32_outer_problem_and_small_temperatures():
     e2, eh = staircase(1.3)
     cfg = SolveConfig(dtype="float32", tau_schedule=(1.0, 0.1, 0.01))
@@ -211,6 +231,7 @@ def test_nan_gradient_is_reported():
         (dict(xtol_rel=0.0), "xtol_rel"),
         (dict(max_evaluations=5), "too small"),
         (dict(hard_polish=-1), "hard_polish"),
+        (dict(max_evaluations=14, reserve_polish=True), "reserved hard polish"),
     ],
 )
 def test_bad_config_is_one_clear_error(kwargs, match):
