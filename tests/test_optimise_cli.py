@@ -142,3 +142,13 @@ def test_hard_estimator_searches_the_best_bracket(weights, tmp_path, capsys):
     assert result["E_hard_star"] <= min(p["E_hard"] for p in result["sweep"])
     assert result["bracket"][0] <= result["r_star"] <= result["bracket"][1]
     assert result["notes"][0].startswith("hard estimator: no gradient")
+
+
+def test_reserve_polish_config_is_the_default_but_for_that_key():
+    from diffsense import config as cfgio
+    from diffsense.optimise import OptimiseConfig
+
+    default = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
+    reserve = cfgio.load(OptimiseConfig, ROOT / "configs/optimise/reserve_polish.toml")
+    assert not default.solve.reserve_polish and reserve.solve.reserve_polish
+    assert cfgio.replace(reserve, solve=cfgio.replace(reserve.solve, reserve_polish=False)) == default
