@@ -87,7 +87,7 @@ def test_monte_carlo_estimator_is_deterministic_and_differentiable():
 def test_monte_carlo_memory_does_not_grow_with_samples():
     # Each sample is rematerialised in the backward pass: without it the compiled value-and-gradient
     # keeps every sample's activations (here 10x the K = 2 scratch memory at K = 32; on the default
-    # problem K = 64 asked for 35 GB).
+    # problem K = 64 did not fit in 24 GB).
     scenes, scenario = toy_scenes(n=2)
     frames = prediction_frames(scenes.num_frames)[:4]
     scratch = {}

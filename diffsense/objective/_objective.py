@@ -123,7 +123,7 @@ class Objective:
             return reduce(self._predict_nI(data, _inputs(data.scenes, det, self.frames, self.fill)))
 
         # Rematerialised: reverse mode would otherwise keep every sample's CS-LSTM activations
-        # (~0.5 GB per sample on the default problem; K = 64 asked for 35 GB). Each sample's
+        # (on the default problem K = 64 did not fit in 24 GB). Each sample's
         # forward pass is recomputed in the backward pass instead, so memory does not grow with K.
         @jax.checkpoint
         def one_sample(uniform):
