@@ -6,6 +6,7 @@ On one objective E(r) (the main job's: diffsense.objective.build_problem), every
 searches the same interval and is judged by the hard E of its answer:
 
     continuous solve        diffsense.solve.solve: the paper's sweep, then optimistix refinement
+    ... + reserved polish   the same with SolveConfig(reserve_polish=True) (not yet the default)
     paper/stepped grid      the sweep's steps alone, hard (the paper's 30, 60, ..., 180 deg on HFOV 30-180)
     dense grid (hard)       diffsense.solve.dense_grid_search every STEP (see --problems)
     Brent on E_hard/E_soft  scipy.optimize.minimize_scalar(method="bounded"), derivative-free
@@ -214,7 +215,14 @@ def optuna_available() -> bool:
 def compare(problem, setting: Setting) -> Comparison:
     """Run every method on `problem.objective` (see the module docstring)."""
     from diffsense._timing import CompileClock
-    from diffsense.solve import PAPER_HFOV_STEPS_DEG, DenseGrid, default_steps, dense_grid_search, solve
+    from diffsense.solve import (
+        PAPER_HFOV_STEPS_DEG,
+        DenseGrid,
+        SolveConfig,
+        default_steps,
+        dense_grid_search,
+        solve,
+    )
 
     obj = problem.objective
     lo, hi = setting.interval
@@ -227,18 +235,26 @@ def compare(problem, setting: Setting) -> Comparison:
     runs, skipped = [], []
     result = {}
 
-    def continuous():
-        # The solve's own root-find program compiles in its first call: JAX's compile time is
-        # measured (CompileClock) and taken off the solve's wall time below.
-        with CompileClock() as clock:
-            result["solve"] = solve(e2_soft, e_hard, (lo, hi))
-        result["compile_s"] = clock.compile_s
-        return result["solve"].r_star
+    def continuous(config):
+        def search():
+            # The solve's own root-find program compiles in its first call: JAX's compile time
+            # is measured (CompileClock) and taken off the solve's wall time below.
+            with CompileClock() as clock:
+                result["solve"] = solve(e2_soft, e_hard, (lo, hi), config=config)
+            result["compile_s"] = clock.compile_s
+            return result["solve"].r_star
 
-    run = rec.run("continuous solve (sweep + optimistix)", continuous)
-    res = result["solve"]
-    runs.append(dataclasses.replace(run, wall_s=run.wall_s - result["compile_s"],
-                                    note="; ".join(res.notes) + ("; on a bound" if res.on_bound else "")))
+        return search
+
+    # The first row is the shipped solve (the verdict is about it); the second keeps the hard
+    # polish's evaluations back from the continuation.
+    solves = (("continuous solve (sweep + optimistix)", SolveConfig()),
+              ("continuous solve + reserved polish (reserve_polish)", SolveConfig(reserve_polish=True)))
+    for name, config in solves:
+        run = rec.run(name, continuous(config))
+        res = result["solve"]
+        runs.append(dataclasses.replace(run, wall_s=run.wall_s - result["compile_s"],
+                                        note="; ".join(res.notes) + ("; on a bound" if res.on_bound else "")))
 
     steps = default_steps(lo, hi)
 
