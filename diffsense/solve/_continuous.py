@@ -10,7 +10,7 @@ Strategy (DESIGN.md, "The solver"):
    best step itself) are compared and `notes` says why the answer is not the soft optimum. So
    E_hard(r*) <= min over steps of E_hard always holds;
 4. a hard polish: a compass search on E_hard around that answer with the evaluations left in
-   the budget (at most `SolveConfig.hard_polish`). The soft objective cannot see the hard one's
+   the budget (at most `SolveConfig.hard_polish`; `reserve_polish` keeps them back from step 2). The soft objective cannot see the hard one's
    fine structure (a vehicle toggling in and out of the FOV at one instant moves E_hard by
    centimetres over a fraction of a degree); a few hard probes near r* settle it, and a probe is
    only accepted when it is strictly better, so this step never makes the answer worse.
@@ -69,7 +69,7 @@ class SolveConfig:
             the polish always gets them. Off by default until the notebooks are re-measured
             with it; on radar HFOV 5-60 deg (an interior optimum, where the continuation
             otherwise spends the budget) it took the answer from E_hard 22.32 to 21.42 m, and
-            left the main job's answer unchanged (README, "Speed against accuracy").
+            left the main job's answer unchanged (README, "The grid-search baseline").
 
     The defaults: three levels halving tau reach the best dense-grid basin of the rippled
     test objective where tau = 1 alone does not (tests/test_solve.py) and, with the secant,
