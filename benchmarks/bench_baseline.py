@@ -2,7 +2,7 @@
 
     nice -n 19 python benchmarks/bench_baseline.py [--variants 8] [--problems SENSOR:PARAM:LO:HI:STEP ...]
 
-On one objective E(r) (the main job's: diffsense.objective.build_problem), every method below
+On one objective E(r) (the main job's: diffsense.metrics.build_problem), every method below
 searches the same interval and is judged by the hard E of its answer:
 
     continuous solve        diffsense.solve.solve: the paper's sweep, then optimistix refinement
@@ -48,7 +48,7 @@ class Setting:
     """One comparison: the problem and the size knobs of the methods.
 
     Attributes:
-        sensor, param: the free parameter (`param` as in diffsense.objective.ProblemConfig).
+        sensor, param: the free parameter (`param` as in diffsense.metrics.ProblemConfig).
         interval: (lo, hi) in the parameter's units.
         dense_step: spacing of the dense hard grid, parameter units.
         brent_maxiter: iteration cap of bounded Brent (it stops earlier at xatol).
@@ -179,7 +179,7 @@ class Recorder:
 
 def build(setting: Setting, variants: int, scenarios: tuple[str, ...] | None = None, predictor=None):
     """The main job's problem for `setting` (shipped weights unless a predictor is given)."""
-    from diffsense.objective import PAPER_SCENARIOS, ProblemConfig, build_problem
+    from diffsense.metrics import PAPER_SCENARIOS, ProblemConfig, build_problem
 
     cfg = ProblemConfig(sensor=setting.sensor, param=setting.param, variants=variants,
                         scenarios=tuple(scenarios or PAPER_SCENARIOS))
@@ -351,8 +351,8 @@ def main() -> None:
     p.add_argument("--trials", type=int, default=40, help="Bayesian optimiser evaluations")
     args = p.parse_args()
 
-    from diffsense import _cli
-    from diffsense.predict import load_predictor
+    from diffsense import cli as _cli
+    from diffsense.predictors import load_predictor
 
     _cli.setup_jax(float64=True, compilation_cache=True)
     print(f"jax {jax.__version__} on {jax.default_backend()}, {os.cpu_count()} CPU cores, "

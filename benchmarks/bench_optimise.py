@@ -47,7 +47,7 @@ def cold_and_warm(model: str | None, variants: int) -> list[tuple[str, float, di
 
 def timed_solve(cfg, predictor):
     from diffsense._timing import CompileClock
-    from diffsense.objective import build_problem
+    from diffsense.metrics import build_problem
     from diffsense.solve import solve
 
     with CompileClock() as clock:
@@ -73,9 +73,9 @@ def main() -> None:
             print(f"{label:<34} {wall:8.1f} {res['wall_s']['compile']:10.1f} {res['wall_s']['run']:8.1f} "
                   f"{res['r_star']:8.2f} {res['E_hard_star']:9.4f}")
 
-    from diffsense import _cli
-    from diffsense.objective import ProblemConfig
-    from diffsense.predict import load_predictor
+    from diffsense import cli as _cli
+    from diffsense.metrics import ProblemConfig
+    from diffsense.predictors import load_predictor
     from diffsense.solve import basin_check, dense_grid_search, solve
 
     _cli.setup_jax(float64=True, compilation_cache=False)

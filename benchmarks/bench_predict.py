@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense.predict import (
+from diffsense.predictors import (
     Predictor,
     load_predictor,
     predict_mean,
@@ -33,7 +33,7 @@ from diffsense.predict import (
     si_to_model,
     state_dict_from_model,
 )
-from diffsense.predict._model import new_model
+from diffsense.predictors._model import new_model
 
 
 def _inputs(b: int, n: int, seed: int = 0):
@@ -145,7 +145,7 @@ def _torch_model(sd: dict[str, np.ndarray]):
 def _torch_fns(sd, args, reference_mean: np.ndarray):
     import torch
 
-    from diffsense.predict import si_to_model
+    from diffsense.predictors import si_to_model
 
     hist_m, nbr_m, slot, _ = args
     b, n = slot.shape
@@ -169,7 +169,7 @@ def _torch_fns(sd, args, reference_mean: np.ndarray):
 
     with torch.no_grad():
         mu = mean_of(net(hist, nbrs, mask)).numpy().transpose(1, 0, 2)  # [B, 25, 2] model frame
-    from diffsense.predict import model_to_si
+    from diffsense.predictors import model_to_si
 
     agree = float(np.max(np.abs(np.asarray(model_to_si(mu)) - reference_mean)))
 

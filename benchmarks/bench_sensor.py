@@ -65,7 +65,7 @@ def synthetic_scenes(num_variants: int, dtype, num_frames: int = 201, num_vehicl
 
 
 def make_objective(config):
-    from diffsense import sensor
+    from diffsense import sensors as sensor
 
     def objective(params, scenes, noise):
         """`noise`: a key per scenario (drawn inside), or the pre-drawn standard normals."""
@@ -118,7 +118,7 @@ def main() -> None:
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", args.x64)
     dtype = jnp.float64 if args.x64 else jnp.float32
-    from diffsense import sensor
+    from diffsense import sensors as sensor
 
     t0 = time.perf_counter()
     scenes = (synthetic_scenes if args.synthetic else engine_scenes)(args.variants, dtype)

@@ -54,7 +54,7 @@ class Setting:
 
     knob: str
     label: str
-    problem: object  # diffsense.objective.ProblemConfig
+    problem: object  # diffsense.metrics.ProblemConfig
     solve: object  # diffsense.solve.SolveConfig
 
 
@@ -109,8 +109,8 @@ def default_config(model: str | None = None, scenarios: Sequence[str] | None = N
     """configs/optimise/default.toml, optionally with other weights, scenarios, variant count or
     interval of the parameter [its units]."""
     from diffsense import config as cfgio
-    from diffsense.objective import check_interval, resolve_param
-    from diffsense.optimise import OptimiseConfig
+    from diffsense.metrics import check_interval, resolve_param
+    from diffsense.cli.optimise import OptimiseConfig
 
     cfg = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
     if interval is not None:
@@ -175,7 +175,7 @@ def _problem_key(problem_cfg):
     """Problems that compile to the same programs: the hard estimator runs only the hard
     program, which does not depend on the estimator's settings."""
     from diffsense import config as cfgio
-    from diffsense.objective import EstimatorConfig
+    from diffsense.metrics import EstimatorConfig
 
     if problem_cfg.estimator.kind == "hard":
         return cfgio.replace(problem_cfg, estimator=EstimatorConfig())
@@ -183,7 +183,7 @@ def _problem_key(problem_cfg):
 
 
 def _interval(cfg) -> tuple[float, float]:
-    from diffsense.objective import check_interval, resolve_param
+    from diffsense.metrics import check_interval, resolve_param
 
     spec = resolve_param(cfg.problem.sensor, cfg.problem.param)
     lo, hi = getattr(getattr(cfg.intervals, cfg.problem.sensor), spec.name)
@@ -195,7 +195,7 @@ def reference(cfg, predictor, variants: int, grid_step: float) -> Reference:
     """The dense hard grid over the default interval on `variants` variants per scenario."""
     from diffsense import config as cfgio
     from diffsense._timing import CompileClock
-    from diffsense.objective import build_problem
+    from diffsense.metrics import build_problem
     from diffsense.solve import dense_grid_search
 
     problem_cfg = cfgio.replace(_problem_key(cfg.problem), variants=variants)
@@ -224,7 +224,7 @@ def measure(cfg, rows: Sequence[Setting], predictor, ref: Reference,
             progress: Callable[[str], None] = lambda _: None) -> list[Row]:
     """Run every setting's search, timed, and evaluate its r* on the reference."""
     from diffsense._timing import CompileClock
-    from diffsense.objective import build_problem
+    from diffsense.metrics import build_problem
 
     interval = _interval(cfg)
     keys = [_problem_key(s.problem) for s in rows]
@@ -264,7 +264,7 @@ def evaluation_cost(cfg, predictor, samples: Sequence[int]) -> list[tuple[str, f
     without a solve: for K too costly to solve (every soft evaluation runs the CS-LSTM K times)."""
     from diffsense import config as cfgio
     from diffsense._timing import CompileClock
-    from diffsense.objective import build_problem
+    from diffsense.metrics import build_problem
 
     lo, hi = _interval(cfg)
     tau = cfg.solve.tau_schedule[-1]
@@ -331,8 +331,8 @@ def main() -> None:
                    help="the parameter's interval (default: the config's, HFOV 30 180 deg)")
     args = p.parse_args()
 
-    from diffsense import _cli
-    from diffsense.predict import load_predictor
+    from diffsense import cli as _cli
+    from diffsense.predictors import load_predictor
 
     _cli.setup_jax(float64=True, compilation_cache=False)  # compile times are cold
     import jax

@@ -29,7 +29,7 @@ import numpy as np
 from diffsense import config
 from diffsense._io import atomic_open
 from diffsense.scene._traffic_config import TrafficConfig
-from diffsense.scene._traffic_dataset import (
+from diffsense.train._dataset import (
     _shard,
     extract_batch,
     samples_per_simulation,

@@ -4,7 +4,7 @@ Works in the reference implementation's own layout and on a PyTorch-layout state
 hist [16, B, 2], nbrs [16, N, 2] (neighbours in grid-id order, lane-major, per sample),
 mask [B, 3, 13, 64] bool. Returns fut_pred [25, B, 5] (single-mode) or a list of 6 of them
 (lon-major) plus lat_pred [B, 3] and lon_pred [B, 2]. Everything in float64, loops where the
-reference has them: it shares no code with diffsense.predict.
+reference has them: it shares no code with diffsense.predictors.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense.scene import Scene
-from diffsense.sensor._datatypes import Detections
+from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import PredictorInputs
 from tests._synthetic import straight_scene
 

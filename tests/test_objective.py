@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.objective import EstimatorConfig, make_objective
+from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.tracks import prediction_frames
 from tests._toy_pipeline import TOY_GAIN, toy_detect, toy_predict, toy_scenes
 

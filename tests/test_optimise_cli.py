@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 from flax import nnx
 
-from diffsense import _cli
-from diffsense.optimise import main
-from diffsense.predict import CSLSTM, save_weights
+from diffsense import cli as _cli
+from diffsense.cli.optimise import main
+from diffsense.predictors import CSLSTM, save_weights
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,7 +119,7 @@ def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
 
 
 def test_config_file_values_reach_the_run_and_flags_override_them(tmp_path):
-    from diffsense.optimise import _load_config, _parser
+    from diffsense.cli.optimise import _load_config, _parser
 
     text = (ROOT / "configs/optimise/default.toml").read_text()
     text = text.replace("variants = 8", "variants = 3").replace("prediction_stride_frames = 4", "prediction_stride_frames = 6")
@@ -146,7 +146,7 @@ def test_hard_estimator_searches_the_best_bracket(weights, tmp_path, capsys):
 
 def test_reserve_polish_config_is_the_default_but_for_that_key():
     from diffsense import config as cfgio
-    from diffsense.optimise import OptimiseConfig
+    from diffsense.cli.optimise import OptimiseConfig
 
     default = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
     reserve = cfgio.load(OptimiseConfig, ROOT / "configs/optimise/reserve_polish.toml")

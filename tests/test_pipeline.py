@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from flax import nnx
 
-from diffsense.objective import ProblemConfig, build_problem
-from diffsense.predict import CSLSTM, Predictor
+from diffsense.metrics import ProblemConfig, build_problem
+from diffsense.predictors import CSLSTM, Predictor
 from diffsense.solve import SolveConfig, solve
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import _numpy_cslstm
-from diffsense.predict._model import model_from_params, param_shapes
-from diffsense.predict import (
+from diffsense.predictors._model import model_from_params, param_shapes
+from diffsense.predictors import (
     Predictor,
     init_predictor,
     load_predictor,
@@ -244,7 +244,7 @@ def test_small_public_functions_under_jit_equal_eager():
 
 
 def test_lstm_hand_written_backward_matches_autodiff():
-    from diffsense.predict._layers import lstm_scan
+    from diffsense.predictors._layers import lstm_scan
 
     def plain(xw, w_hh):  # the textbook LSTM with logistic gates, differentiated by JAX
         hidden = w_hh.shape[0]

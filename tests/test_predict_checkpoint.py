@@ -10,7 +10,7 @@ import pytest
 
 import _torch_zip
 from diffsense.errors import InputError
-from diffsense.predict import (
+from diffsense.predictors import (
     load_predictor,
     load_weights,
     read_card,
@@ -18,8 +18,8 @@ from diffsense.predict import (
     save_weights,
     state_dict_from_model,
 )
-from diffsense.predict import _api
-from diffsense.predict._model import model_from_params, param_shapes
+from diffsense.predictors import _api
+from diffsense.predictors._model import model_from_params, param_shapes
 
 
 def _model(maneuvers: bool):

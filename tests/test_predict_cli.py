@@ -1,4 +1,4 @@
-"""`python -m diffsense.predict parity|card`: reference-layout outputs of both published
+"""`python -m diffsense.predictors parity|card`: reference-layout outputs of both published
 checkpoints against the numpy forward; bad input is one line and exit code 2, nothing written."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import _numpy_cslstm
-from diffsense import _cli
-from diffsense.predict import read_state_dict
-from diffsense.predict.__main__ import main
+from diffsense import cli as _cli
+from diffsense.predictors import read_state_dict
+from diffsense.cli.predict import main
 
 
 def _run(argv: list[str]) -> int:
@@ -77,21 +77,21 @@ def test_parity_cli_bad_inputs(tmp_path, capsys, ngsim_checkpoint):
 
 def test_cli_exit_code_two_in_a_real_process(tmp_path):
     proc = subprocess.run(
-        [sys.executable, "-m", "diffsense.predict", "parity", "--checkpoint", str(tmp_path / "no.tar"),
+        [sys.executable, "-m", "diffsense.predictors", "parity", "--checkpoint", str(tmp_path / "no.tar"),
          "--inputs", str(tmp_path / "in.npz"), "--out", str(tmp_path / "out.npz")],
         capture_output=True, text=True, timeout=120,
     )
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and proc.stderr.startswith("error:"), proc.stderr
-    proc = subprocess.run([sys.executable, "-m", "diffsense.predict", "frobnicate"], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, "-m", "diffsense.predictors", "frobnicate"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and proc.stderr.startswith("error:"), proc.stderr
 
 
 def test_card_prints_the_model_card(tmp_path, capsys):
     import json
 
-    from diffsense.predict import save_weights
-    from diffsense.predict._model import model_from_params, param_shapes
+    from diffsense.predictors import save_weights
+    from diffsense.predictors._model import model_from_params, param_shapes
 
     params = {k: {kk: np.zeros(vv, np.float32) for kk, vv in v.items()} for k, v in param_shapes(False).items()}
     path = tmp_path / "w.msgpack"

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-import diffsense.scene.__main__ as cli
+import diffsense.cli.scene as cli
 from diffsense.errors import InputError
 
 
@@ -77,7 +77,7 @@ def test_generate_is_routed_to_the_generator(monkeypatch):
 
     seen = []
     fake = types.SimpleNamespace(main=lambda argv: seen.append(argv) or 7)
-    monkeypatch.setitem(sys.modules, "diffsense.scene._generate_cli", fake)
+    monkeypatch.setitem(sys.modules, "diffsense.cli.generate", fake)
     assert cli.main(["generate", "--out", "x"]) == 7 and seen == [["--out", "x"]]
 
 

@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from diffsense._cli import run
-from diffsense.sensor.__main__ import main
+from diffsense.cli import run
+from diffsense.cli.sensors import main
 
 
 def _json(capsys, *argv):
@@ -70,7 +70,7 @@ def test_bad_input_is_one_line_and_exit_code_2(tmp_path, monkeypatch, capsys, ar
 
 
 def test_module_entry_point_exits_2_without_traceback():
-    proc = subprocess.run([sys.executable, "-m", "diffsense.sensor", "inspect", "--sensor",
+    proc = subprocess.run([sys.executable, "-m", "diffsense.sensors", "inspect", "--sensor",
                            "radar", "--hfov", "-5"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     assert proc.stderr.strip() == "error: radar hfov_deg = -5 is outside its domain (0, 360] deg"

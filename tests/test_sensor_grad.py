@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from test_sensor_scenes import jit_p_detect, make_scene
 
-from diffsense import sensor
+from diffsense import sensors as sensor
 from diffsense.scene import CAR, TRUCK
 
 KEY = jax.random.key(3, impl="rbg")  # threefry compiles ~3 s slower on CPU

@@ -1,4 +1,4 @@
-"""Every public function of diffsense.sensor under jit; batches; dtype following."""
+"""Every public function of diffsense.sensors under jit; batches; dtype following."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from test_sensor_scenes import traffic_scene
 
-from diffsense import sensor
+from diffsense import sensors as sensor
 from diffsense.errors import InputError
 from diffsense.scene import CAR, TRUCK
 

@@ -8,7 +8,7 @@ import math
 import jax
 import pytest
 
-from diffsense import sensor
+from diffsense import sensors as sensor
 from diffsense.config import default_text
 from diffsense.errors import InputError
 

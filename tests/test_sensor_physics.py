@@ -11,11 +11,11 @@ import pytest
 from test_sensor_scenes import jit_detect, jit_p_detect, make_scene, traffic_scene
 
 from diffsense import config as cfg
-from diffsense import sensor
+from diffsense import sensors as sensor
 from diffsense.scene import CAR, TRUCK, VAN
-from diffsense.sensor._geometry import Tracks
-from diffsense.sensor._inspect import boresight_report
-from diffsense.sensor._radar import _radar_terms
+from diffsense.sensors._geometry import Tracks
+from diffsense.sensors._inspect import boresight_report
+from diffsense.sensors._radar import _radar_terms
 
 RADAR = sensor.load_config("radar")
 jit_terms = jax.jit(lambda tracks, params, config, mode: _radar_terms(tracks, params, config, mode, 1.0),

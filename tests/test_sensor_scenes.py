@@ -7,7 +7,7 @@ import numpy as np
 import jax
 import jax.numpy as jnp
 
-from diffsense import sensor
+from diffsense import sensors as sensor
 from diffsense.scene import CAR, Scene
 
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from test_sensor_scenes import make_scene
 
-from diffsense import sensor
+from diffsense import sensors as sensor
 from diffsense.scene import CAR, TRUCK
-from diffsense.sensor import _camera, _radar
-from diffsense.sensor._geometry import Tracks, angular_half_width, polar, wrap_angle
+from diffsense.sensors import _camera, _radar
+from diffsense.sensors._geometry import Tracks, angular_half_width, polar, wrap_angle
 
 EDGE = 8.0  # "a few tau": a gate at 8 tau is within sigmoid(-8) = 3.4e-4 of its indicator
 TEMPERATURES = (1.0, 0.1, 0.01, 0.001)

@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = """
 import json, jax
 jax.config.update("jax_enable_x64", True)
-from diffsense.objective import make_objective
+from diffsense.metrics import make_objective
 from diffsense.tracks import prediction_frames
 from tests._toy_pipeline import TOY_GAIN, toy_detect, toy_predict, toy_scenes
 scenes, scenario = toy_scenes(n=3)  # 3 variants on 4 devices: exercises the zero-weight padding

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from diffsense.scene import TARGET_INDEX
-from diffsense.sensor._datatypes import Detections
+from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import (
     GRID_CELLS,
     build_inputs,

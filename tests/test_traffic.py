@@ -9,7 +9,7 @@ import pytest
 from diffsense.config import replace
 from diffsense.errors import InputError
 from diffsense.scene._traffic_config import TrafficConfig
-from diffsense.scene._traffic_dataset import simulate_batch, simulation_keys
+from diffsense.train._dataset import simulate_batch, simulation_keys
 
 LANE_W = 3.66
 

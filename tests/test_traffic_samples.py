@@ -11,16 +11,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense._cli import run
+from diffsense.cli import run
 from diffsense.config import to_dict
 from diffsense.errors import InputError
-from diffsense.scene._generate_cli import main
+from diffsense.cli.generate import main
 from diffsense.scene._idm import IDMParams
-from diffsense.scene._samples import (
+from diffsense.train._samples import (
     BRAKING, GRID_CELL_M, KEEP, LEFT, NORMAL, RIGHT, extract_samples, lateral_label, longitudinal_label,
 )
 from diffsense.scene._traffic_state import TrafficTrajectories, TrafficVehicles
-from diffsense.scene._traffic_dataset import generate_samples, read_dataset, read_meta, samples_per_simulation
+from diffsense.train._dataset import generate_samples, read_dataset, read_meta, samples_per_simulation
 from test_traffic import CFG, small_config
 
 LANE_W = 3.66
@@ -245,7 +245,7 @@ def test_cli_rejects_bad_config_with_one_line_and_exit_2(tmp_path, text, needle)
     config.write_text(text)
     out = tmp_path / "set"
     proc = subprocess.run(
-        [sys.executable, "-m", "diffsense.scene._generate_cli", "--config", str(config), "--out", str(out)],
+        [sys.executable, "-m", "diffsense.cli.generate", "--config", str(config), "--out", str(out)],
         capture_output=True, text=True, timeout=120,
     )
     assert proc.returncode == 2, proc.stderr

@@ -14,8 +14,8 @@ import pytest
 import _tiny_traffic
 from diffsense.config import from_dict
 from diffsense.errors import InputError
-from diffsense.predict import load_predictor, predict_mean, read_card, state_dict_from_model
-from diffsense.predict import load_weights
+from diffsense.predictors import load_predictor, predict_mean, read_card, state_dict_from_model
+from diffsense.predictors import load_weights
 from diffsense.train import TrainConfig, constant_velocity_m, load_samples, rmse_per_second, train
 from diffsense.train._loss import class_bce, mse, nll
 
@@ -142,7 +142,7 @@ def test_cli_bad_config_is_one_line(tmp_path):
 def test_mse_in_scaled_units_weighs_each_axis_in_its_own_unit(data):
     from flax import nnx
 
-    from diffsense.predict._model import new_model
+    from diffsense.predictors._model import new_model
     from diffsense.train._config import OptimConfig
     from diffsense.train._loop import _make_step
 
@@ -203,7 +203,7 @@ def test_shipped_default_config_loads():
 def test_position_scale_folds_exactly_into_the_plain_network():
     from flax import nnx
 
-    from diffsense.predict._model import model_from_params, param_shapes
+    from diffsense.predictors._model import model_from_params, param_shapes
     from diffsense.train._loop import fold_position_scale
 
     rng = np.random.default_rng(1)

@@ -47,17 +47,9 @@ from diffsense.scene._scenario_config import (
     load_scenario,
     load_vehicle_models,
 )
-from diffsense.scene._samples import LAYOUT_VERSION, DenseSamples, extract_samples
 from diffsense.scene._simulate import SCENE_DT_S, simulate_scenario
 from diffsense.scene._traffic import simulate_traffic
 from diffsense.scene._traffic_config import TrafficConfig
-from diffsense.scene._traffic_dataset import (
-    generate_samples,
-    read_dataset,
-    read_meta,
-    read_shard,
-    write_dataset,
-)
 
 __all__ = [
     "ADJACENT", "BACKGROUND", "CAR", "EGO", "EGO_INDEX", "KIND_NAMES", "LEAD", "ROLE_NAMES",
@@ -71,6 +63,5 @@ __all__ = [
     "load_road_config", "make_road", "road_angle_rad",
     "ScenarioConfig", "VehicleModels", "list_scenarios", "load_scenario", "load_vehicle_models",
     "SCENE_DT_S", "simulate_scenario",
-    "LAYOUT_VERSION", "DenseSamples", "TrafficConfig", "extract_samples", "generate_samples",
-    "read_dataset", "read_meta", "read_shard", "simulate_traffic", "write_dataset",
+    "TrafficConfig", "simulate_traffic",
 ]

@@ -26,7 +26,7 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from diffsense.scene import TARGET_INDEX, Scene
-from diffsense.sensor._datatypes import Detections
+from diffsense.sensors._datatypes import Detections
 from diffsense.tracks._fill import FillPolicy, fill_window
 
 HISTORY_POINTS = 16

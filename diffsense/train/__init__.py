@@ -1,16 +1,23 @@
-"""Training the CS-LSTM on generated traffic: `python -m diffsense.train --config FILE [--resume]`.
+"""Training the CS-LSTM on generated traffic: samples, datasets and the training loop.
+
+    python -m diffsense.train generate --out DIR     # write a training set (the sample layout: _samples.py)
+    python -m diffsense.train --config FILE          # train on it
 
 `train(cfg)` runs the reference recipe (Adam, gradient clipping, MSE then NLL epochs) on the
 traffic generator's dataset, validates each epoch, checkpoints every N steps (resumable to the
 same result) and writes the weights (msgpack) with a model card (JSON).
 """
 
+from diffsense.train._dataset import generate_samples, read_dataset, read_meta, read_shard, write_dataset
+from diffsense.train._samples import LAYOUT_VERSION, DenseSamples, extract_samples
 from diffsense.train._config import DataConfig, OptimConfig, RunConfig, TrainConfig
 from diffsense.train._data import Samples, load_samples, split_by_simulation
 from diffsense.train._loop import train
 from diffsense.train._metrics import constant_velocity_m, rmse_per_second
 
 __all__ = [
+    "LAYOUT_VERSION", "DenseSamples", "extract_samples", "generate_samples", "read_dataset",
+    "read_meta", "read_shard", "write_dataset",
     "DataConfig",
     "OptimConfig",
     "RunConfig",

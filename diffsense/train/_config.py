@@ -81,7 +81,7 @@ class RunConfig:
 
     checkpoint_dir: str = "runs/train"
     checkpoint_every_steps: int = 200
-    weights: str = "diffsense/predict/weights/cslstm.msgpack"
+    weights: str = "diffsense/predictors/weights/cslstm.msgpack"
     val_batch_size: int = 512
 
     def __post_init__(self):

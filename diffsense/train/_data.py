@@ -1,6 +1,6 @@
 """Training samples: read the generator's sharded dataset into padded arrays in the model frame.
 
-The dataset (see diffsense.scene._samples for the layout) is SI road frame; the network trains
+The dataset (see diffsense.train._samples for the layout) is SI road frame; the network trains
 in the model frame of the published checkpoints (feet, lateral right), converted here with the
 predictor's own boundary functions, so shipped weights and published ones share one convention.
 Neighbours are packed per sample into K columns (K = the most any sample has), padding slot -1
@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from diffsense.errors import InputError
-from diffsense.predict import HIST_LEN, si_to_model
+from diffsense.predictors import HIST_LEN, si_to_model
 
 # The layout's owner reads and checks shards (shapes, dtypes, finiteness, index ranges).
-from diffsense.scene import read_meta, read_shard
+from diffsense.train._dataset import read_meta, read_shard
 
 
 @dataclasses.dataclass(frozen=True)

@@ -22,8 +22,8 @@ from flax import nnx, serialization
 from diffsense import _io
 from diffsense.config import to_dict
 from diffsense.errors import InputError
-from diffsense.predict import model_to_si, select_mean
-from diffsense.predict._model import N_LAT, N_LON, new_model
+from diffsense.predictors import model_to_si, select_mean
+from diffsense.predictors._model import N_LAT, N_LON, new_model
 from diffsense.train._config import OptimConfig, TrainConfig
 from diffsense.train._data import Samples, load_samples, split_by_simulation
 from diffsense.train._loss import class_bce, mse, nll
@@ -239,7 +239,7 @@ def train(
         "maneuvers": cfg.maneuvers,
         "parameters": int(sum(np.size(x) for x in jax.tree.leaves(params))),
         "frame": "model frame: feet, lateral positive right (as the NGSIM checkpoints); "
-                 "diffsense.predict converts SI at its boundary",
+                 "diffsense.predictors converts SI at its boundary",
         "train_config": to_dict(cfg),
         "data": {
             "path": cfg.data.path,
@@ -266,7 +266,7 @@ def train(
         "history": history,
         "software": {"jax": jax.__version__, "flax": __import__("flax").__version__, "optax": optax.__version__},
     }
-    from diffsense.predict._weights import save_weights
+    from diffsense.predictors._weights import save_weights
 
     save_weights(cfg.run.weights, nnx.merge(graphdef, params), card)
     return card

@@ -16,11 +16,11 @@ import numpy as np
 
 from diffsense.config import replace
 from diffsense.errors import InputError
-from diffsense.objective._estimators import EstimatorConfig
-from diffsense.objective._objective import Objective, make_objective
-from diffsense.predict import Predictor, load_predictor, predict_mean
+from diffsense.metrics._estimators import EstimatorConfig
+from diffsense.metrics._objective import Objective, make_objective
+from diffsense.predictors import Predictor, load_predictor, predict_mean
 from diffsense.scene import Scene, load_scenario, relevant_vehicles, simulate_scenario
-from diffsense.sensor import ParamSpec, detect, load_config, param_specs, with_param
+from diffsense.sensors import ParamSpec, detect, load_config, param_specs, with_param
 from diffsense.tracks import PredictorInputs, prediction_frames
 
 PAPER_SCENARIOS: tuple[str, ...] = ("sc01", "sc02", "sc03", "sc04", "sc05", "sc06")

@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point; `argv` excludes the word `generate`."""
     args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
     from diffsense import config
-    from diffsense._cli import setup_jax
+    from diffsense.cli import setup_jax
     from diffsense.scene._traffic_config import TrafficConfig
 
     cfg = config.load(TrafficConfig, args.config) if args.config else config.load_default(TrafficConfig, "traffic/default.toml")
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     import jax
     from tqdm import tqdm
 
-    from diffsense.scene._traffic_dataset import check_output_dir, write_dataset
+    from diffsense.train._dataset import check_output_dir, write_dataset
 
     check_output_dir(Path(args.out))
     # The simulation is float32 whatever the x64 flag (the samples are float32): keep the flag.
@@ -72,6 +72,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    from diffsense._cli import run
+    from diffsense.cli import run
 
     run(main)

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from diffsense.scene import EGO_INDEX, Scene
-from diffsense.sensor._gates import Mode, soft_less, soft_ramp
+from diffsense.sensors._gates import Mode, soft_less, soft_ramp
 
 
 @jax.tree_util.register_dataclass

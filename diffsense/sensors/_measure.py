@@ -15,9 +15,9 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from diffsense.errors import InputError
 from diffsense.scene import EGO_INDEX, Scene
-from diffsense.sensor._datatypes import Detections
-from diffsense.sensor._gates import check_mode, check_temperature, p_from_gates
-from diffsense.sensor._geometry import Tracks, to_world
+from diffsense.sensors._datatypes import Detections
+from diffsense.sensors._gates import check_mode, check_temperature, p_from_gates
+from diffsense.sensors._geometry import Tracks, to_world
 
 KeyOrNoise = PRNGKeyArray | Float[Array, "2 T V"]
 

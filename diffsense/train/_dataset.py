@@ -4,7 +4,7 @@ Simulation n of a dataset with seed S uses the key `fold_in(key(S), n)`, so a sa
 on (config, seed, simulation index), not on how the work is batched. One batch of
 `sampling.simulations_per_shard` simulations is one jitted call (vmap over simulations of the
 lax.scan over time, then the sample extraction) and becomes one shard. The layout of the shards
-and of meta.json is documented in diffsense.scene._samples.
+and of meta.json is documented in diffsense.train._samples.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from jaxtyping import PRNGKeyArray
 from diffsense._io import atomic_open, write_json
 from diffsense.config import to_dict
 from diffsense.errors import InputError
-from diffsense.scene._samples import (
+from diffsense.train._samples import (
     FUT_LEN,
     GRID_CELL_M,
     GRID_SLOTS,
@@ -112,7 +112,7 @@ def _shard(cfg: TrafficConfig, first: int, keep: int, dense: DenseSamples) -> di
 
 
 def generate_samples(cfg: TrafficConfig, num_samples: int, key: PRNGKeyArray) -> dict[str, np.ndarray]:
-    """`num_samples` training samples in the shard layout (diffsense.scene._samples), in memory."""
+    """`num_samples` training samples in the shard layout (diffsense.train._samples), in memory."""
     if num_samples < 1:
         raise InputError(f"num_samples must be >= 1, got {num_samples}")
     parts = [_shard(cfg, first, keep, dense) for first, keep, dense in _batches(cfg, num_samples, key)]

@@ -35,11 +35,11 @@ from flax import nnx
 from jaxtyping import Array, Float, Int
 
 from diffsense.errors import InputError
-from diffsense.predict._checkpoint import read_state_dict
-from diffsense.predict._convert import model_from_state_dict
-from diffsense.predict._frame import model_to_si, si_to_model
-from diffsense.predict._model import N_LAT, CSLSTM, Prediction, new_model
-from diffsense.predict._weights import DEFAULT_WEIGHTS, load_weights
+from diffsense.predictors._checkpoint import read_state_dict
+from diffsense.predictors._convert import model_from_state_dict
+from diffsense.predictors._frame import model_to_si, si_to_model
+from diffsense.predictors._model import N_LAT, CSLSTM, Prediction, new_model
+from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights
 
 Mode = Literal["most_probable", "weighted"]
 

@@ -19,11 +19,11 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from diffsense.scene import Scene
-from diffsense.sensor._datatypes import Detections
-from diffsense.sensor._gates import Mode
-from diffsense.sensor._geometry import Tracks, polar, vehicle_occlusion
-from diffsense.sensor._measure import KeyOrNoise, detect_of, p_detect_of
-from diffsense.sensor._params import RadarConfig, RadarParams
+from diffsense.sensors._datatypes import Detections
+from diffsense.sensors._gates import Mode
+from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
+from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
+from diffsense.sensors._params import RadarConfig, RadarParams
 
 _SPEED_OF_LIGHT_MPS = 299_792_458.0
 _BOLTZMANN_DBM_PER_HZ = -174.0  # kT0 at 290 K

@@ -13,8 +13,8 @@ import jax
 import numpy as np
 
 from diffsense.errors import InputError
-from diffsense.predict._api import Predictor, predict_model_frame
-from diffsense.predict._model import ENC_SIZE, HIST_LEN, N_CELLS, N_LANES, N_SLOTS
+from diffsense.predictors._api import Predictor, predict_model_frame
+from diffsense.predictors._model import ENC_SIZE, HIST_LEN, N_CELLS, N_LANES, N_SLOTS
 
 
 def reference_to_compact(hist, nbrs, mask, source: str = "inputs"):

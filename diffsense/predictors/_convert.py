@@ -10,7 +10,7 @@ import numpy as np
 from flax import nnx
 
 from diffsense.errors import InputError
-from diffsense.predict._model import CSLSTM, model_from_params, param_shapes
+from diffsense.predictors._model import CSLSTM, model_from_params, param_shapes
 
 _LINEARS = ("ip_emb", "dyn_emb", "op", "op_lat", "op_lon")
 _LSTMS = ("enc_lstm", "dec_lstm")

@@ -19,10 +19,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from diffsense.objective._estimators import EstimatorConfig, mc_uniforms, relaxed_bernoulli
-from diffsense.objective._sharding import shard_leading_axis
+from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms, relaxed_bernoulli
+from diffsense.metrics._sharding import shard_leading_axis
 from diffsense.scene import Scene
-from diffsense.sensor._datatypes import Detections
+from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import (
     FillPolicy,
     PredictorInputs,

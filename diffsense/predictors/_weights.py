@@ -15,7 +15,7 @@ from flax import nnx, serialization
 
 from diffsense import _io
 from diffsense.errors import InputError
-from diffsense.predict._model import CSLSTM, model_from_params, param_shapes
+from diffsense.predictors._model import CSLSTM, model_from_params, param_shapes
 
 FORMAT = "diffsense-cslstm"
 VERSION = 1

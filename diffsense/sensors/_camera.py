@@ -15,11 +15,11 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from diffsense.scene import Scene
-from diffsense.sensor._datatypes import Detections
-from diffsense.sensor._gates import Mode
-from diffsense.sensor._geometry import Tracks, polar, vehicle_occlusion
-from diffsense.sensor._measure import KeyOrNoise, detect_of, p_detect_of
-from diffsense.sensor._params import CameraConfig, CameraParams
+from diffsense.sensors._datatypes import Detections
+from diffsense.sensors._gates import Mode
+from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
+from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
+from diffsense.sensors._params import CameraConfig, CameraParams
 
 
 def camera_px_per_rad(params: CameraParams) -> Float[Array, ""]:

@@ -8,12 +8,12 @@ from jaxtyping import Array, Float
 
 from diffsense.errors import InputError
 from diffsense.scene import Scene
-from diffsense.sensor._camera import camera_detect, camera_p_detect
-from diffsense.sensor._datatypes import Detections
-from diffsense.sensor._gates import Mode
-from diffsense.sensor._measure import KeyOrNoise, measurement_noise
-from diffsense.sensor._params import CameraConfig, CameraParams, RadarConfig, RadarParams
-from diffsense.sensor._radar import radar_detect, radar_p_detect
+from diffsense.sensors._camera import camera_detect, camera_p_detect
+from diffsense.sensors._datatypes import Detections
+from diffsense.sensors._gates import Mode
+from diffsense.sensors._measure import KeyOrNoise, measurement_noise
+from diffsense.sensors._params import CameraConfig, CameraParams, RadarConfig, RadarParams
+from diffsense.sensors._radar import radar_detect, radar_p_detect
 
 Params = RadarParams | CameraParams
 Config = RadarConfig | CameraConfig

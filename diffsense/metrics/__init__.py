@@ -1,6 +1,6 @@
 """Objective: E_RMSE(r) (the paper's Eq. 12), its estimators and per-horizon RMSE."""
 
-from diffsense.objective._build import (
+from diffsense.metrics._build import (
     PAPER_SCENARIOS,
     Problem,
     ProblemConfig,
@@ -9,8 +9,8 @@ from diffsense.objective._build import (
     resolve_param,
     simulate_scenes,
 )
-from diffsense.objective._estimators import ESTIMATORS, Estimator, EstimatorConfig, relaxed_bernoulli
-from diffsense.objective._objective import DetectFn, Objective, ObjectiveData, PredictFn, make_objective
+from diffsense.metrics._estimators import ESTIMATORS, Estimator, EstimatorConfig, relaxed_bernoulli
+from diffsense.metrics._objective import DetectFn, Objective, ObjectiveData, PredictFn, make_objective
 
 __all__ = [
     "PAPER_SCENARIOS", "Problem", "ProblemConfig", "build_problem", "check_interval",

@@ -1,0 +1,58 @@
+"""CS-LSTM trajectory prediction (Deo & Trivedi 2018) in Flax NNX, SI at its boundary.
+
+Entry points: `load_predictor` (shipped weights, a project `.msgpack`, or a published PyTorch
+checkpoint read without torch), `predict_mean` (compact neighbours) and `predict_mean_dense`
+(the 39-slot grid), both pure and jit/grad-able. `si_to_model` / `model_to_si` are the only unit
+and axis conversion. CLI: `python -m diffsense.predictors {parity,card}`.
+"""
+
+from diffsense.predictors._api import (
+    Predictor,
+    init_predictor,
+    load_predictor,
+    predict_mean,
+    predict_mean_dense,
+    predict_model_frame,
+    select_mean,
+)
+from diffsense.predictors._checkpoint import read_state_dict
+from diffsense.predictors._convert import model_from_state_dict, state_dict_from_model
+from diffsense.predictors._frame import M_PER_FT, model_to_si, si_to_model
+from diffsense.predictors._model import (
+    FUT_LEN,
+    HIST_LEN,
+    N_SLOTS,
+    CSLSTM,
+    Prediction,
+    output_activation,
+)
+from diffsense.predictors._parity import reference_forward, reference_to_compact
+from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights, read_card, save_weights
+
+__all__ = [
+    "CSLSTM",
+    "DEFAULT_WEIGHTS",
+    "FUT_LEN",
+    "HIST_LEN",
+    "M_PER_FT",
+    "N_SLOTS",
+    "Prediction",
+    "Predictor",
+    "init_predictor",
+    "load_predictor",
+    "load_weights",
+    "model_from_state_dict",
+    "model_to_si",
+    "output_activation",
+    "predict_mean",
+    "predict_mean_dense",
+    "predict_model_frame",
+    "read_card",
+    "read_state_dict",
+    "reference_forward",
+    "reference_to_compact",
+    "save_weights",
+    "select_mean",
+    "si_to_model",
+    "state_dict_from_model",
+]

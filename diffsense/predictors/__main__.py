@@ -1,0 +1,6 @@
+"""`python -m diffsense.predictors`: the command line in diffsense.cli.predict."""
+
+from diffsense.cli import run
+from diffsense.cli.predict import main
+
+run(main)

@@ -1,0 +1,49 @@
+"""Sensor models: soft (differentiable) and hard radar and stereo-camera detections of a scene.
+
+Entry points: `detect(scene, params, config, key, mode=...)` -> `Detections` [T, V] (and
+`detect_batch` over [N, T, V]); `p_detect` for the probabilities alone. Parameters r are small
+pytrees (`RadarParams`, `CameraParams`); constants come from `configs/sensors/*.toml` via
+`load_config`. `param_specs` lists a sensor's differentiable parameters with their domains.
+"""
+
+from diffsense.sensors._camera import (
+    camera_depth_sigma_m,
+    camera_detect,
+    camera_p_detect,
+    camera_px_per_rad,
+)
+from diffsense.sensors._datatypes import Detections
+from diffsense.sensors._detect import detect, detect_batch, p_detect
+from diffsense.sensors._gates import MODES
+from diffsense.sensors._measure import measurement_noise
+from diffsense.sensors._params import (
+    SENSORS,
+    CameraConfig,
+    CameraParams,
+    CameraTemperatures,
+    ParamSpec,
+    RadarConfig,
+    RadarParams,
+    RadarTemperatures,
+    check_params,
+    load_config,
+    make_params,
+    param_specs,
+    with_param,
+)
+from diffsense.sensors._radar import (
+    radar_detect,
+    radar_gain_dbi,
+    radar_p_detect,
+    radar_rcs_dbsm,
+    radar_snr_db,
+)
+
+__all__ = [
+    "MODES", "SENSORS", "CameraConfig", "CameraParams", "CameraTemperatures", "Detections",
+    "ParamSpec", "RadarConfig", "RadarParams", "RadarTemperatures", "camera_depth_sigma_m",
+    "camera_detect", "camera_p_detect", "camera_px_per_rad", "check_params", "detect",
+    "detect_batch", "load_config", "make_params", "measurement_noise", "p_detect", "param_specs",
+    "radar_detect",
+    "radar_gain_dbi", "radar_p_detect", "radar_rcs_dbsm", "radar_snr_db", "with_param",
+]
