@@ -261,35 +261,86 @@ def _hard_polish(counted, r, e_hard, lower, upper, probes, min_step):
     return r, e_hard
 
 
+class _Squashed(eqx.Module):
+    """dE^2/dr squashed into (-atol/2, atol/2), its sign kept: optx.Bisection reads only the
+    sign of fn but also demands |fn| < atol to stop, so the interval width alone decides.
+    `args` = (tau, atol), both traced: every level shares one compiled root find."""
+
+    g: Callable[[Any, Any], Any]
+
+    def __call__(self, r, args):
+        tau, atol = args
+        grad = self.g(r, tau)
+        return 0.5 * atol * grad / (1.0 + jnp.abs(grad))
+
+
+def _checked_grad(counted, r, tau):
+    value = counted.grad(r, tau)
+    if not math.isfinite(value):
+        raise FloatingPointError(f"dE^2/dr is not finite at r={r} (tau={tau})")
+    return value
+
+
+def _bracket_from(counted, y0, tau, lower, upper, step, evaluations):
+    """Walk downhill from y0 with doubling steps (the first `step`) until dE^2/dr changes sign.
+
+    Returns (a, b, bound): the minimum lies in [a, b] (g(a) < 0 < g(b)); a == b is the answer
+    itself (an exact zero of g, or a bracket end with bound -1 / +1); None when the
+    `evaluations` allowed ran out first (then a == b is the furthest point reached downhill).
+    """
+    y = min(max(y0, lower), upper)
+    g_y = _checked_grad(counted, y, tau)
+    if g_y == 0.0:
+        return y, y, 0
+    direction = -1.0 if g_y > 0 else 1.0
+    end = lower if direction < 0 else upper
+    for _ in range(evaluations - 1):
+        if y == end:
+            return y, y, int(direction)  # downhill all the way to the bracket's end
+        probe = min(max(y + direction * step, lower), upper)
+        g_probe = _checked_grad(counted, probe, tau)
+        if (g_probe > 0) != (g_y > 0) or g_probe == 0.0:
+            return (y, probe, 0) if direction > 0 else (probe, y, 0)
+        y, step = probe, 2.0 * step
+    return (y, y, int(direction)) if y == end else (y, y, None)
+
+
 def _level_bisection(g, counted, y0, tau, lower, upper, tol, max_steps):
+    """One continuation level by bisection, warm-started at y0 (the previous level's answer).
+
+    dE^2/dr is evaluated at y0 and at points walking downhill from it with doubling steps
+    (first: `tol`) until its sign changes; optx.Bisection then halves that bracket until it is
+    narrower than `tol` and returns its midpoint. A warm start near the answer costs about three
+    gradient evaluations per level, where bisecting the whole bracket at every level spends the
+    budget before the last one. At most `max_steps` gradient evaluations; returns
+    ((r, bound), evaluations, converged) with bound -1 / +1 when the minimum is on the bracket's
+    lower / upper edge.
+    """
     before = counted.gradient
-    g_lo, g_hi = counted.grad(lower, tau), counted.grad(upper, tau)
-    if not (math.isfinite(g_lo) and math.isfinite(g_hi)):
-        raise FloatingPointError(f"dE^2/dr is not finite on the bracket [{lower}, {upper}]")
-    if g_lo >= 0 or g_hi <= 0:
-        if g_lo >= 0 and g_hi <= 0:  # a maximum inside: the better end wins
-            lower_wins = counted.e2(lower, tau) <= counted.e2(upper, tau)
-        else:
-            lower_wins = g_lo >= 0
-        return (lower, -1) if lower_wins else (upper, 1), counted.gradient - before, True
-
-    # optx.Bisection only reads the sign of fn and also demands |fn| < atol to stop: squash g
-    # into (-tol/2, tol/2) keeping its sign, so the interval width alone decides.
-    def squashed(r, tau_):
-        grad = g(r, tau_)
-        return 0.5 * tol * grad / (1.0 + jnp.abs(grad))
-
+    a, b, bound = _bracket_from(counted, y0, tau, lower, upper, tol, max_steps)
+    if bound is None or a == b:
+        return (a, bound or 0), counted.gradient - before, bound is not None
+    width = b - a
+    # halvings until the bracket is narrower than tol
+    needed = math.floor(math.log2(width / tol)) + 1 if width >= tol else 0
+    steps = min(needed, max_steps - (counted.gradient - before))
+    if steps < 1:
+        return (0.5 * (a + b), 0), counted.gradient - before, needed == 0
+    # Stop after exactly `steps` halvings (1.5 x the width they leave: no rounding ties).
+    atol = 1.5 * width / 2.0**steps
     sol = optx.root_find(
-        squashed,
-        optx.Bisection(rtol=0.0, atol=tol, flip=False),
-        counted.as_r(min(max(y0, lower), upper)),
-        args=counted.as_r(tau),
-        options=dict(lower=counted.as_r(lower), upper=counted.as_r(upper)),
-        max_steps=max(max_steps - 2, 1),  # the two end evaluations above count too
+        _Squashed(g),
+        optx.Bisection(rtol=0.0, atol=counted.as_r(atol), flip=False),
+        counted.as_r(a + 0.5 * width),
+        args=(counted.as_r(tau), counted.as_r(atol)),
+        options=dict(lower=counted.as_r(a), upper=counted.as_r(b)),
+        max_steps=64,
         throw=False,
     )
     counted.gradient += int(sol.stats["num_steps"])
-    done = int(sol.result == optx.RESULTS.successful)
+    if not math.isfinite(float(sol.state.error)):
+        raise FloatingPointError(f"dE^2/dr is not finite in [{a}, {b}] (tau={tau})")
+    done = steps == needed and sol.result == optx.RESULTS.successful
     return (float(sol.value), 0), counted.gradient - before, bool(done)
 
 
