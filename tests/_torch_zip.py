@@ -3,7 +3,8 @@
 Emits the same pickle opcodes as torch.save of a state_dict (protocol 2): an OrderedDict whose
 values are `torch._utils._rebuild_tensor_v2((storage pid), offset, size, stride, False,
 OrderedDict())`, storages as persistent ids ('storage', torch.FloatStorage, key, 'cpu', numel).
-`extra_global` lets a test smuggle in a call to an arbitrary global (a tampered pickle).
+`extra_global` lets a test smuggle in a call to an arbitrary global (a tampered pickle);
+`geometry` overrides a tensor's (offset, size, stride, numel) as written, for hostile-geometry tests.
 """
 
 from __future__ import annotations
@@ -20,7 +21,10 @@ def _unicode(s: str) -> bytes:
 
 
 def _int(i: int) -> bytes:
-    return b"J" + struct.pack("<i", i)
+    if -(1 << 31) <= i < (1 << 31):
+        return b"J" + struct.pack("<i", i)
+    raw = i.to_bytes((i.bit_length() + 8) // 8, "little", signed=True)  # LONG1, as pickle does
+    return b"\x8a" + bytes([len(raw)]) + raw
 
 
 def _tuple(items: list[bytes]) -> bytes:
@@ -31,13 +35,15 @@ def _global(module: str, name: str) -> bytes:
     return b"c" + module.encode() + b"\n" + name.encode() + b"\n"
 
 
-def pickle_bytes(sd: dict[str, np.ndarray], extra_global: tuple[str, str, str] | None = None) -> bytes:
+def pickle_bytes(sd: dict[str, np.ndarray], extra_global: tuple[str, str, str] | None = None,
+                 geometry: dict[str, tuple[int, tuple, tuple, int]] | None = None) -> bytes:
     out = [b"\x80\x02", _global("collections", "OrderedDict"), b")R", b"("]
     for key_id, (name, arr) in enumerate(sd.items()):
-        pid = _tuple([_unicode("storage"), _global("torch", "FloatStorage"), _unicode(str(key_id)),
-                      _unicode("cpu"), _int(arr.size)])
         stride = [int(np.prod(arr.shape[i + 1:])) for i in range(arr.ndim)]
-        args = _tuple([pid + b"Q", _int(0), _tuple([_int(n) for n in arr.shape]),
+        offset, shape, stride, numel = (geometry or {}).get(name, (0, arr.shape, stride, arr.size))
+        pid = _tuple([_unicode("storage"), _global("torch", "FloatStorage"), _unicode(str(key_id)),
+                      _unicode("cpu"), _int(numel)])
+        args = _tuple([pid + b"Q", _int(offset), _tuple([_int(n) for n in shape]),
                        _tuple([_int(s) for s in stride]), b"\x89",
                        _global("collections", "OrderedDict") + b")R"])
         out += [_unicode(name), _global("torch._utils", "_rebuild_tensor_v2"), args, b"R"]
@@ -48,9 +54,10 @@ def pickle_bytes(sd: dict[str, np.ndarray], extra_global: tuple[str, str, str] |
     return b"".join(out)
 
 
-def write(path, sd: dict[str, np.ndarray], extra_global=None, root: str = "archive") -> None:
-    with zipfile.ZipFile(path, "w") as z:
-        z.writestr(f"{root}/data.pkl", pickle_bytes(sd, extra_global))
+def write(path, sd: dict[str, np.ndarray], extra_global=None, root: str = "archive",
+          geometry=None, compression: int = zipfile.ZIP_STORED) -> None:
+    with zipfile.ZipFile(path, "w", compression) as z:
+        z.writestr(f"{root}/data.pkl", pickle_bytes(sd, extra_global, geometry))
         for key_id, arr in enumerate(sd.values()):
             z.writestr(f"{root}/data/{key_id}", np.ascontiguousarray(arr, "<f4").tobytes())
         z.writestr(f"{root}/version", "3\n")

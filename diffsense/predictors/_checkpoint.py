@@ -241,13 +241,15 @@ def read_state_dict(path: str | Path) -> dict[str, np.ndarray]:
     try:
         with fp:
             _check_directory(fp)
-            with zipfile.ZipFile(fp) as archive:
+            try:
+                archive = zipfile.ZipFile(fp)
+            except zipfile.BadZipFile:
+                raise _Refused("not a zip archive (a PyTorch >= 1.6 checkpoint is one)") from None
+            with archive:
                 obj = _load(archive)
     except _Refused as e:
-        reason = str(e) if str(e).startswith("refused") else f"refused: {e}"
+        reason = str(e) if str(e).startswith(("refused", "not a zip")) else f"refused: {e}"
         raise InputError(f"checkpoint {path}: {reason}") from None
-    except zipfile.BadZipFile:
-        raise InputError(f"checkpoint {path}: not a zip archive (a PyTorch >= 1.6 checkpoint is one)") from None
     except MemoryError:
         raise
     except Exception as e:  # noqa: BLE001 - any failure of a tampered file is the same refusal
