@@ -1,0 +1,113 @@
+"""Tracks pinned by hand: soft fills as expectations over detection patterns, and the 10 Hz ->
+5 Hz history with a missed detection on a kept and on a dropped frame.
+
+tests/test_tracks.py pins the hard fills to plain-loop definitions and the history's two ends;
+these pin the soft values and every point in between.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import jax
+import numpy as np
+import pytest
+
+from diffsense.scene import TARGET_INDEX
+from diffsense.sensors._datatypes import Detections
+from diffsense.tracks import build_inputs, ground_truth_detections, true_future
+from diffsense.tracks._fill import fill_window
+from tests._synthetic import straight_scene
+
+
+def _hard_fill(z, seen, policy):
+    """A missed point's value for one detection pattern, by scanning outwards from it."""
+    out = z.copy()
+    for k in np.flatnonzero(~seen):
+        before = [i for i in range(k - 1, -1, -1) if seen[i]][:1]
+        after = [i for i in range(k + 1, len(z)) if seen[i]][:1]
+        if policy == "zero" or not (before or after):
+            out[k] = 0.0
+        elif policy == "hold":
+            out[k] = z[before[0]] if before else 0.0
+        elif before and after:
+            a, b = before[0], after[0]
+            out[k] = ((b - k) * z[a] + (k - a) * z[b]) / (b - a)
+        else:
+            out[k] = z[(before or after)[0]]
+    return out
+
+
+def _expectation(z, p, policy):
+    """E[filled window] over all 2^W independent detection patterns with probabilities p."""
+    total = np.zeros_like(z)
+    for pattern in itertools.product((False, True), repeat=len(p)):
+        seen = np.array(pattern)
+        total += np.prod(np.where(seen, p, 1 - p)) * _hard_fill(z, seen, policy)
+    return total
+
+
+@pytest.mark.parametrize("policy", ["zero", "hold"])
+def test_soft_zero_and_hold_are_exact_expectations(policy):
+    rng = np.random.default_rng(3)
+    z, p = rng.normal(size=(7, 2)) * 10, rng.uniform(0.05, 0.95, 7)
+    np.testing.assert_allclose(np.asarray(fill_window(z, p, policy)), _expectation(z, p, policy),
+                               atol=1e-12)
+
+
+def test_soft_hold_by_hand():
+    # z = 1, 2, 3 with p = 1, 1/2, 1/2: the last point is 3 (p 1/2), else 2 (1/4), else 1 (1/4).
+    got = np.asarray(fill_window(np.array([[1.0, 0], [2, 0], [3, 0]]), np.array([1, 0.5, 0.5]), "hold"))
+    np.testing.assert_allclose(got[:, 0], [1.0, 1.5, 2.25])
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "soft interp blends the uncertain point's own measurement into its fill (the forward and "
+    "backward holds at k include p_k z_k): 4.25 instead of 0.5 * 4 + 0.5 * 5 = 4.5"))
+def test_soft_interp_single_uncertain_point():
+    # Detections at 0 and 10 m for sure, the middle one (measured 4 m) with p = 1/2: missed, it
+    # is interpolated to 5 m, so its expectation is 0.5 * 4 + 0.5 * 5 = 4.5 m.
+    z = np.array([[0.0, 0.0], [4.0, 0.0], [10.0, 0.0]])
+    got = np.asarray(fill_window(z, np.array([1.0, 0.5, 1.0]), "interp"))
+    np.testing.assert_allclose(got[1, 0], 4.5)
+
+
+# Ego and a target 20 m ahead in the same lane, the target at 24 m/s: at 10 Hz it moves 2.4 m a
+# frame, so its 16-point 5 Hz history at t is lon = -4.8 m * (15, 14, ..., 0), lat = 0.
+T0 = 40  # the prediction instant (frame)
+TRUE_HIST = -4.8 * np.arange(15, -1, -1)
+_build = jax.jit(build_inputs, static_argnums=3)
+
+
+def _history(p_target_by_frame, fill):
+    scene = straight_scene(s0_m=[0.0, 20.0], lane=[1, 1], speed_mps=[25.0, 24.0])
+    gt = ground_truth_detections(scene)
+    p = gt.p_detect
+    for frame, value in p_target_by_frame.items():
+        p = p.at[frame, TARGET_INDEX].set(value)
+    inputs = _build(scene, Detections(p_detect=p, x_m=gt.x_m, y_m=gt.y_m),
+                    jax.numpy.asarray([T0]), fill)
+    return np.asarray(inputs.hist[0]), np.asarray(true_future(scene, jax.numpy.asarray([T0]))[0])
+
+
+def test_history_is_16_points_at_5_hz_and_future_25_points():
+    hist, future = _history({}, "zero")
+    np.testing.assert_allclose(hist[:, 0], TRUE_HIST, atol=1e-9)
+    np.testing.assert_allclose(hist[:, 1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(future[:, 0], 4.8 * np.arange(1, 26), atol=1e-9)
+
+
+@pytest.mark.parametrize("fill, kept_point", [
+    ("zero", 0.0),      # a missed point is the target's own position at t
+    ("hold", -26.4),    # the last 10 Hz detection, 1.1 s before t: -24 * 1.1
+    ("interp", -24.0),  # halfway between 0.9 s and 1.1 s before t: exact for constant speed
+])
+def test_fill_happens_at_10_hz_before_downsampling(fill, kept_point):
+    # Missed: frame t - 10 (1.0 s, kept as history point 10) and t - 5 (0.5 s, dropped at 5 Hz).
+    hist, _ = _history({T0 - 10: 0.0, T0 - 5: 0.0}, fill)
+    want = TRUE_HIST.copy()
+    want[10] = kept_point
+    np.testing.assert_allclose(hist[:, 0], want, atol=1e-9)
+    # Soft: p = 1/2 at t - 10 gives the average of the detected and the filled value.
+    soft, _ = _history({T0 - 10: 0.5}, fill)
+    assert soft[10, 0] == pytest.approx(0.5 * (-24.0) + 0.5 * kept_point, abs=1e-9)
