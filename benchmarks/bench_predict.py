@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense.predictors import (
-    Predictor,
+    CSLSTMPredictor,
     load_predictor,
     predict_mean,
     predict_model_frame,
@@ -59,7 +59,7 @@ def _time_interleaved(fns: dict, repeats: int) -> dict[str, float]:
     return {name: statistics.median(t) for name, t in times.items()}
 
 
-def _jax_fns(predictor: Predictor, args):
+def _jax_fns(predictor: CSLSTMPredictor, args):
     forward = jax.jit(predict_mean)
 
     def loss(hist, nbr_hist, weight, p, slot):
@@ -202,7 +202,7 @@ def main() -> None:
     if args.checkpoint:
         predictors = [load_predictor(args.checkpoint)]
     else:
-        predictors = [Predictor.from_model(new_model(m, seed=0)) for m in (False, True)]
+        predictors = [CSLSTMPredictor.from_model(new_model(m, seed=0)) for m in (False, True)]
     print(f"CS-LSTM, B = {args.batch}, {args.neighbours} neighbours per target, float32, CPU "
           f"({os.cpu_count()} cores), median of {args.repeats}; jax {jax.__version__}, torch {torch_version}"
           + (f" ({torch.get_num_threads()} threads)" if torch_version else ""))

@@ -17,6 +17,7 @@ import time
 import jax
 
 from diffsense.config import replace
+from diffsense.metrics import relevance_reach
 from diffsense.scene import list_scenarios, load_scenario, relevant_vehicles, simulate_scenario
 
 
@@ -54,8 +55,8 @@ def main() -> None:
         run = lambda: simulate_scenario(cfg, args.variants, key)  # noqa: E731
         scene, _ = _timed(run)
         sim = min(_timed(run)[1] for _ in range(args.repeats))
-        kept, _ = _timed(lambda: relevant_vehicles(scene))
-        rel = min(_timed(lambda: relevant_vehicles(scene))[1] for _ in range(args.repeats))
+        kept, _ = _timed(lambda: relevant_vehicles(scene, **relevance_reach()))
+        rel = min(_timed(lambda: relevant_vehicles(scene, **relevance_reach()))[1] for _ in range(args.repeats))
         print(f"{count:>10} {scene.num_vehicles:>12} {kept.num_vehicles:>7} {sim:>11.4f} {rel:>11.4f}")
 
 

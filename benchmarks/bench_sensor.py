@@ -29,12 +29,13 @@ TARGET_MS = 50.0
 
 
 def engine_scenes(num_variants: int, dtype) -> list:
+    from diffsense.metrics import relevance_reach
     from diffsense.scene import list_scenarios, load_scenario, relevant_vehicles, simulate_scenario
 
     scenes = []
     for i, name in enumerate(list_scenarios()):
         batch = simulate_scenario(load_scenario(name), num_variants, jax.random.key(i), dtype=dtype)
-        scenes.append(relevant_vehicles(batch))
+        scenes.append(relevant_vehicles(batch, **relevance_reach()))
     return scenes
 
 

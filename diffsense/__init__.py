@@ -1,11 +1,27 @@
 """diffsense: differentiable sensor-parameter optimisation for deep-learning perception.
 
+    import jax, diffsense as ds
+    problem = ds.Problem(sensor="radar", params={"hfov_deg": (30.0, 180.0)},
+                         scenarios=["sc01", "sc03"], variants=4, seed=0)
+    E = ds.objective(problem)                                  # pure: jit, grad, vmap
+    value, grad = jax.value_and_grad(E)({"hfov_deg": 45.0})    # E [m]; grad is a dict like r
+    result = ds.optimise(problem)                              # the main job; result.r_star
+
 Pipeline (one subpackage per stage, data flowing one way):
-    scene -> sensor -> tracks -> predict -> objective -> solve
+    scene -> sensors -> tracks -> predictors -> metrics -> solve -> report
+The command-line faces live in `diffsense.cli`.
 """
 
+__version__ = "0.2.0"
+
+from diffsense import predictors, sensors
+from diffsense._optimise import objective, optimise
+from diffsense._problem import Problem
+from diffsense._result import Result
 from diffsense.errors import InputError
+from diffsense.metrics import Objective
 
-__version__ = "0.1.0"
-
-__all__ = ["InputError", "__version__"]
+__all__ = [
+    "InputError", "Objective", "Problem", "Result", "__version__", "objective", "optimise",
+    "predictors", "sensors",
+]

@@ -11,33 +11,35 @@ import numpy as np
 import pytest
 from flax import nnx
 
-from diffsense.metrics import ProblemConfig, build_problem
-from diffsense.predictors import CSLSTM, Predictor
-from diffsense.solve import SolveConfig, solve
+import diffsense as ds
+from diffsense.predictors import CSLSTM, CSLSTMPredictor
+from diffsense.solve import Evaluator, SolveConfig, solve
 
 
 @pytest.fixture(scope="module")
-def predictor() -> Predictor:
-    return Predictor.from_model(CSLSTM(rngs=nnx.Rngs(0)))
+def predictor() -> CSLSTMPredictor:
+    return CSLSTMPredictor.from_model(CSLSTM(rngs=nnx.Rngs(0)))
 
 
 def _problem(predictor, sensor, param, scenarios=("sc05",)):
-    cfg = ProblemConfig(sensor=sensor, param=param, scenarios=scenarios, variants=2,
-                        prediction_stride_frames=20, float64=True)
-    return build_problem(cfg, predictor=predictor).objective
+    problem = ds.Problem(sensor=sensor, params={param: (1.0, 300.0)}, scenarios=scenarios, variants=2,
+                         prediction_stride_frames=20, float64=True, predictor=predictor)
+    return Evaluator(ds.objective(problem))
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sensor, param, r", [("radar", "hfov", 40.0), ("camera", "range", 60.0)])
 def test_gradient_matches_central_differences(predictor, sensor, param, r):
     obj = _problem(predictor, sensor, param)
-    value, grad = obj.value_and_grad(r, 2.0)
+    value, (grad,) = obj.value_and_grad(r, 2.0)
     h = 1e-3
     fd = (obj.e2_soft(r + h, 2.0) - obj.e2_soft(r - h, 2.0)) / (2 * h)
     assert np.isfinite(value) and np.isfinite(grad)
     np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-10)
-    # The traced function is the same objective (jit of grad, float64).
-    traced = jax.jit(jax.grad(obj.traced_e2))(r, 2.0)
+    # The module itself is the same objective (jit of grad, float64).
+    E = obj.objective
+    name = next(iter(E.names))
+    traced = jax.jit(jax.grad(lambda x, E: E.e2({name: x}, 2.0)))(r, E)
     np.testing.assert_allclose(float(traced), grad, rtol=1e-10)
 
 

@@ -11,7 +11,7 @@ import pytest
 import _numpy_cslstm
 from diffsense.predictors._model import model_from_params, param_shapes
 from diffsense.predictors import (
-    Predictor,
+    CSLSTMPredictor,
     init_predictor,
     load_predictor,
     model_to_si,
@@ -30,7 +30,7 @@ B, N = 3, 4
 VARIANTS = [False, True]
 
 
-def _random_predictor(maneuvers: bool, seed: int = 0) -> Predictor:
+def _random_predictor(maneuvers: bool, seed: int = 0) -> CSLSTMPredictor:
     # PyTorch's init is small; widen it so that every layer matters in the comparison.
     rng = np.random.default_rng(seed)
     params = jax.tree.map(
@@ -38,7 +38,7 @@ def _random_predictor(maneuvers: bool, seed: int = 0) -> Predictor:
         param_shapes(maneuvers),
         is_leaf=lambda x: isinstance(x, tuple),
     )
-    return Predictor.from_model(model_from_params(maneuvers, params))
+    return CSLSTMPredictor.from_model(model_from_params(maneuvers, params))
 
 
 def _reference_batch(rng: np.random.Generator, b: int = B):

@@ -23,6 +23,9 @@ from diffsense.scene import (
 )
 from diffsense.scene._road import frenet_to_cartesian
 
+# The CS-LSTM's 3 s history and 13 cells of 15 ft (+-97.5 ft = 29.718 m); the radar 4.2 m ahead.
+REACH = dict(history_s=3.0, grid_half_length_m=29.718, sensor_reach_m=4.2)
+
 
 @pytest.fixture(scope="module")
 def sc01_with_background():
@@ -36,7 +39,7 @@ def sc01_with_background():
 def test_far_background_costs_nothing(sc01_with_background):
     plain, crowded = sc01_with_background
     assert crowded.num_vehicles == 105
-    kept_plain, kept_crowded = relevant_vehicles(plain), relevant_vehicles(crowded)
+    kept_plain, kept_crowded = relevant_vehicles(plain, **REACH), relevant_vehicles(crowded, **REACH)
     assert kept_crowded.num_vehicles == kept_plain.num_vehicles <= 5  # padded to the batch's own max
     for field in dataclasses.fields(Scene):
         a, b = np.asarray(getattr(kept_plain, field.name)), np.asarray(getattr(kept_crowded, field.name))
@@ -94,9 +97,9 @@ def test_occluders_between_ego_and_target_are_kept():
         (180.0, lane2),    # 100 m beyond the target: neither
         (95.0, lane2),     # in the target's grid (left lane, +15 m)
     ])
-    mask = np.asarray(jax.jit(relevant_mask)(scene))
+    mask = np.asarray(jax.jit(lambda sc: relevant_mask(sc, **REACH))(scene))
     assert mask.tolist() == [True, True, True, True, False, False, True]
-    kept = relevant_vehicles(scene)
+    kept = relevant_vehicles(scene, **REACH)
     assert kept.num_vehicles == 5 and np.array_equal(kept.s_m, scene.s_m[:, [0, 1, 2, 3, 6]])
 
 
@@ -106,7 +109,7 @@ def test_prediction_frames_limit_the_history_windows():
     scene = _line_scene([(360.0, 9.15), (60.0, 5.49), (45.0, 5.49)] + [(-400.0, 1.83)] * 4)
     s = scene.s_m.at[:, 2].set(45.0 + 0.5 * jnp.arange(120.0))
     scene = dataclasses.replace(scene, s_m=s)
-    assert bool(relevant_mask(scene, jnp.array([10]))[2])
-    late = relevant_mask(scene, jnp.array([110]))  # history 80..110: 100+ m behind the target
+    assert bool(relevant_mask(scene, jnp.array([10]), **REACH)[2])
+    late = relevant_mask(scene, jnp.array([110]), **REACH)  # history 80..110: 100+ m behind the target
     assert not bool(late[2]) and bool(late[0]) and bool(late[1])
-    assert np.array_equal(relevant_mask(scene), [True, True, True] + [False] * 4)
+    assert np.array_equal(relevant_mask(scene, **REACH), [True, True, True] + [False] * 4)

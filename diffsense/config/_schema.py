@@ -6,7 +6,7 @@ a parsed TOML table and refuses, with one line naming the key, any unknown key, 
 positive, ...) belong in the dataclass's own `__post_init__`, raising `InputError`.
 
 Supported field types: bool, int, float (an int is accepted and converted), str,
-`Literal[...]`, `tuple[T, ...]`, `list[T]`, `X | None`, and nested config dataclasses.
+`Literal[...]`, `tuple[T, ...]`, `list[T]`, `dict[str, T]`, `X | None`, and nested config dataclasses.
 """
 
 from __future__ import annotations
@@ -48,6 +48,13 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
             choices = ", ".join(repr(a) for a in args)
             raise InputError(f"{where}: {value!r} is not one of {choices}")
         return value
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise InputError(f"{where}: expected a table, got {type(value).__name__} {value!r}")
+        key_tp, item_tp = args if args else (str, Any)
+        if key_tp is not str:
+            raise TypeError(f"unsupported config dict key type {_type_name(key_tp)} at {where}")
+        return {str(k): _convert(v, item_tp, f"{where}.{k}") for k, v in value.items()}
     if origin in (tuple, list):
         if not isinstance(value, (list, tuple)):
             raise InputError(f"{where}: expected a list, got {type(value).__name__} {value!r}")
@@ -113,6 +120,8 @@ def to_dict(config: Any) -> Any:
         return {f.name: to_dict(getattr(config, f.name)) for f in dataclasses.fields(config)}
     if isinstance(config, (list, tuple)):
         return [to_dict(v) for v in config]
+    if isinstance(config, dict):
+        return {k: to_dict(v) for k, v in config.items()}
     return config
 
 

@@ -1,20 +1,12 @@
-"""Objective: E_RMSE(r) (the paper's Eq. 12), its estimators and per-horizon RMSE."""
+"""Metrics: E_RMSE(r) (the paper's Eq. 12) as a pure equinox Module, its estimators, and the
+per-horizon RMSE of both predictions against the true future."""
 
-from diffsense.metrics._build import (
-    PAPER_SCENARIOS,
-    Problem,
-    ProblemConfig,
-    build_problem,
-    check_interval,
-    resolve_param,
-    simulate_scenes,
-)
+from diffsense.metrics._build import PAPER_SCENARIOS, make_objective, relevance_reach, simulate_scenes
 from diffsense.metrics._estimators import ESTIMATORS, Estimator, EstimatorConfig, relaxed_bernoulli
-from diffsense.metrics._objective import DetectFn, Objective, ObjectiveData, PredictFn, make_objective
+from diffsense.metrics._objective import HardEvaluation, Objective, ObjectiveData, safe_sqrt
 
 __all__ = [
-    "PAPER_SCENARIOS", "Problem", "ProblemConfig", "build_problem", "check_interval",
-    "resolve_param", "simulate_scenes",
-    "ESTIMATORS", "Estimator", "EstimatorConfig", "relaxed_bernoulli",
-    "DetectFn", "Objective", "ObjectiveData", "PredictFn", "make_objective",
+    "ESTIMATORS", "PAPER_SCENARIOS", "Estimator", "EstimatorConfig", "HardEvaluation", "Objective",
+    "ObjectiveData", "make_objective", "relaxed_bernoulli", "relevance_reach", "safe_sqrt",
+    "simulate_scenes",
 ]

@@ -1,14 +1,15 @@
-"""Assemble E(r) for a named sensor parameter from configs: scenes, sensor, predictor.
+"""Assemble E(r): simulate the scenarios, keep what each scene requires, fix every random draw.
 
-This is where the pipeline stages meet: the paper's scenarios are simulated (variant 0 nominal,
-the rest randomised from the seed), reduced to the vehicles each scene requires, the sensor is
-loaded with its defaults and one parameter left free, and the CS-LSTM is loaded.
+The paper's scenarios are simulated (variant 0 nominal, the rest randomised from the seed) and
+reduced to the vehicles each scene requires: those that can enter the target's social grid
+during a history window (sized by the predictor's `InputSpec`) and those that can hide them from
+the sensors (sized by the sensors' mountings). Ground-truth predictions are made once here.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Literal
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -16,79 +17,21 @@ import numpy as np
 
 from diffsense.config import replace
 from diffsense.errors import InputError
-from diffsense.metrics._estimators import EstimatorConfig
-from diffsense.metrics._objective import Objective, make_objective
-from diffsense.predictors import Predictor, load_predictor, predict_mean
+from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms
+from diffsense.metrics._objective import Objective, ObjectiveData
+from diffsense.metrics._sharding import shard_leading_axis
+from diffsense.predictors import InputSpec
 from diffsense.scene import Scene, load_scenario, relevant_vehicles, simulate_scenario
-from diffsense.sensors import ParamSpec, detect, load_config, param_specs, with_param
-from diffsense.tracks import PredictorInputs, prediction_frames
+from diffsense.sensors import Sensor
+from diffsense.tracks import FillPolicy, build_inputs, flatten_instants, ground_truth_detections, prediction_frames, true_future
 
 PAPER_SCENARIOS: tuple[str, ...] = ("sc01", "sc02", "sc03", "sc04", "sc05", "sc06")
 
 
-@dataclasses.dataclass(frozen=True)
-class ProblemConfig:
-    """What E(r) is computed over.
-
-    Attributes:
-        sensor: "radar" or "camera".
-        param: the free parameter, e.g. "hfov_deg" ("hfov" is accepted as a short name).
-        scenarios: scenario names or TOML paths.
-        variants: scene variants per scenario (variant 0 nominal) [-].
-        model: predictor weights: "" for the shipped ones, else a .msgpack or PyTorch checkpoint path.
-        fill: missing-detection policy, "zero", "hold" or "interp".
-        estimator: how detection uncertainty enters (mean-field, Monte-Carlo, hard).
-        seed: fixes scene variants, measurement noise and Monte-Carlo draws.
-        prediction_stride_frames: one prediction instant every this many 10 Hz frames [-].
-        background_vehicles: if > 0, replaces every scenario's count of far background
-            vehicles (they never reach the target's grid; the cost must not grow with them).
-        float64: compute E(r) in float64 (the solver's default) rather than float32.
-    """
-
-    sensor: Literal["radar", "camera"] = "radar"
-    param: str = "hfov_deg"
-    scenarios: tuple[str, ...] = PAPER_SCENARIOS
-    variants: int = 8
-    model: str = ""
-    fill: Literal["zero", "hold", "interp"] = "hold"
-    estimator: EstimatorConfig = EstimatorConfig()
-    seed: int = 0
-    prediction_stride_frames: int = 4
-    background_vehicles: int = 0
-    float64: bool = True
-
-    def __post_init__(self):
-        if self.variants < 1:
-            raise InputError(f"variants must be >= 1, got {self.variants}")
-        if not self.scenarios:
-            raise InputError("at least one scenario is needed")
-        if self.background_vehicles < 0:
-            raise InputError(f"background_vehicles must be >= 0, got {self.background_vehicles}")
-        if self.prediction_stride_frames < 1:
-            raise InputError(f"prediction_stride_frames must be >= 1, got {self.prediction_stride_frames}")
-
-
-def resolve_param(sensor: str, name: str) -> ParamSpec:
-    """The spec of a sensor parameter by full ("hfov_deg") or short ("hfov") name."""
-    specs = {s.name: s for s in param_specs(sensor)}
-    if name in specs:
-        return specs[name]
-    short = {s.name.rsplit("_", 1)[0]: s for s in specs.values()}
-    if name in short:
-        return short[name]
-    known = ", ".join(f"{k} ({v.name})" for k, v in short.items())
-    raise InputError(f"unknown {sensor} parameter {name!r} (known: {known})")
-
-
-def check_interval(spec: ParamSpec, lo: float, hi: float) -> None:
-    """Refuse a reversed interval or one outside the parameter's physical domain."""
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        raise InputError(f"interval bounds must be finite numbers, got {lo} {hi}")
-    if not lo < hi:
-        raise InputError(f"interval must have LO < HI, got {lo:g} {hi:g}")
-    for value in (lo, hi):
-        if not spec.contains(value):
-            raise InputError(f"interval {lo:g} {hi:g} is outside the domain of {spec.name}: {spec.describe()}")
+def relevance_reach(spec: InputSpec, sensors: Sequence[Sensor]) -> dict[str, float]:
+    """The keywords of `scene.relevant_vehicles` for a predictor's spec and the ego's sensors."""
+    return dict(history_s=spec.history_s, grid_half_length_m=spec.grid_half_length_m,
+                sensor_reach_m=max(s.mount_x_m for s in sensors))
 
 
 def _pad_vehicles(scene: Scene, width: int) -> Scene:
@@ -113,59 +56,75 @@ def _pad_vehicles(scene: Scene, width: int) -> Scene:
     return Scene(**out, dt_s=scene.dt_s)
 
 
-def simulate_scenes(cfg: ProblemConfig, key: jax.Array) -> tuple[Scene, np.ndarray, list[str]]:
-    """All variants of all scenarios, reduced to their relevant vehicles: Scene [N, T, V]."""
-    dtype = jnp.float64 if cfg.float64 else jnp.float32
+def simulate_scenes(
+    scenarios: Sequence[str], variants: int, key: jax.Array, *, spec: InputSpec, sensors: Sequence[Sensor],
+    stride_frames: int = 4, background_vehicles: int = 0, dtype=jnp.float64,
+) -> tuple[Scene, np.ndarray, tuple[str, ...]]:
+    """All variants of all scenarios, reduced to their relevant vehicles: Scene [N, T, V],
+    the scenario index of each variant [N], and the scenario names."""
     scenes, names = [], []
-    for i, name in enumerate(cfg.scenarios):
+    for i, name in enumerate(scenarios):
         scenario = load_scenario(name)
-        if cfg.background_vehicles:
-            scenario = replace(scenario, background=replace(scenario.background, count=cfg.background_vehicles))
-        sim = simulate_scenario(scenario, cfg.variants, jax.random.fold_in(key, i), dtype=dtype)
-        frames = prediction_frames(sim.num_frames, cfg.prediction_stride_frames)
-        scenes.append(relevant_vehicles(sim, frames))
+        if background_vehicles:
+            scenario = replace(scenario, background=replace(scenario.background, count=background_vehicles))
+        sim = simulate_scenario(scenario, variants, jax.random.fold_in(key, i), dtype=dtype)
+        frames = prediction_frames(sim.num_frames, stride_frames, spec, sim.dt_s)
+        scenes.append(relevant_vehicles(sim, frames, **relevance_reach(spec, sensors)))
         names.append(scenario.name)
     lengths = {s.num_frames for s in scenes}
     if len(lengths) != 1:
         raise InputError(f"scenarios must have the same duration to be pooled, got {sorted(lengths)} frames")
     width = max(s.num_vehicles for s in scenes)
     batch = jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(s, width) for s in scenes])
-    scenario_index = np.repeat(np.arange(len(scenes)), cfg.variants)
-    return batch, scenario_index, names
+    return batch, np.repeat(np.arange(len(scenes)), variants), tuple(names)
 
 
-def _predict(predictor: Predictor, inputs: PredictorInputs):
-    return predict_mean(predictor, inputs.hist, inputs.nbr_hist, inputs.nbr_slot, inputs.nbr_weight)
+def make_objective(
+    scenes: Scene,
+    scenario: np.ndarray,
+    frames: np.ndarray,
+    sensor: Sensor,
+    predictor,
+    *,
+    names: Sequence[str],
+    fill: FillPolicy = "hold",
+    estimator: EstimatorConfig = EstimatorConfig(),
+    key: jax.Array | None = None,
+    scenario_names: Sequence[str] | None = None,
+    shard: bool = True,
+) -> Objective:
+    """E(r) of `sensor` and `predictor` over the scene variants `scenes` [N, T, V].
 
-
-@dataclasses.dataclass(frozen=True)
-class Problem:
-    """A built E(r) and what it was built from."""
-
-    objective: Objective
-    config: ProblemConfig
-    param: ParamSpec
-    scenario_names: list[str]
-    sensor_config: Any
-
-
-def build_problem(cfg: ProblemConfig, predictor: Predictor | None = None) -> Problem:
-    """E(r) for `cfg.param` of `cfg.sensor` over the configured scenes (see `ProblemConfig`)."""
-    spec = resolve_param(cfg.sensor, cfg.param)
-    sensor_config = load_config(cfg.sensor)
-    base = sensor_config.params
-    predictor = load_predictor(cfg.model or None) if predictor is None else predictor
-    key = jax.random.PRNGKey(cfg.seed)
-    scene_key, noise_key = jax.random.split(key)
-    scenes, scenario_index, names = simulate_scenes(cfg, scene_key)
-
-    def detect_fn(scene, r, tau, mode, k):
-        params = with_param(base, spec.name, r)
-        return detect(scene, params, sensor_config, k, mode=mode, temperature=tau)
-
-    frames = prediction_frames(scenes.num_frames, cfg.prediction_stride_frames)
-    objective = make_objective(scenes, scenario_index, frames, detect_fn, _predict, predictor,
-                               fill=cfg.fill, estimator=cfg.estimator, key=noise_key,
-                               num_scenarios=len(names))
-    return Problem(objective=objective, config=cfg, param=spec, scenario_names=names,
-                   sensor_config=sensor_config)
+    `key` fixes every random draw (measurement noise, Monte-Carlo uniforms): same key, same E(r).
+    Ground-truth predictions are computed here, once. With several JAX devices the variants
+    are sharded over them (padded with zero-weight copies to a multiple of the device count);
+    with one device nothing changes.
+    """
+    for name in names:
+        sensor.spec(name)
+    frames = np.asarray(frames, dtype=np.int32)
+    scenario = jnp.asarray(scenario, jnp.int32)
+    n = scenario.shape[0]
+    dtype = scenes.x_m.dtype
+    key = jax.random.PRNGKey(0) if key is None else key
+    noise_key, mc_key = jax.random.split(key)
+    # Random draws are made per real variant before any padding, so sharding never changes them.
+    noise_keys = jax.random.split(noise_key, n)
+    k = estimator.samples if estimator.kind == "mc" else 0
+    uniform = jax.vmap(lambda kk: mc_uniforms(kk, k, scenes.x_m.shape[1:], dtype))(jax.random.split(mc_key, n))
+    spec = predictor.spec
+    fut = jax.vmap(lambda s: true_future(s, frames, spec))(scenes)
+    fixed = (scenes, scenario, jnp.ones((n,), dtype), noise_keys, uniform, fut)
+    if shard:
+        fixed = shard_leading_axis(fixed, pad_weight_index=2)
+    scenes, scenario, weight, noise_keys, uniform, fut = fixed
+    gt = jax.vmap(lambda s: build_inputs(s, ground_truth_detections(s), frames, fill, spec))(scenes)
+    gt_pred = jax.jit(lambda p, x: p(x))(predictor, flatten_instants(gt))
+    gt_pred = gt_pred.reshape(scenario.shape[0], len(frames), -1, 2)
+    data = ObjectiveData(scenes=scenes, scenario=scenario, weight=weight, gt_pred=gt_pred,
+                         true_fut=fut.astype(gt_pred.dtype), noise_key=noise_keys, mc_uniform=uniform)
+    if scenario_names is None:
+        scenario_names = tuple(f"scenario{i}" for i in range(int(jnp.max(scenario)) + 1))
+    return Objective(data=data, sensor=sensor, predictor=predictor, names=tuple(names),
+                     frames=tuple(int(f) for f in frames), fill=fill, estimator=estimator,
+                     scenario_names=tuple(scenario_names))

@@ -1,4 +1,8 @@
-"""CS-LSTM trajectory prediction (Deo & Trivedi 2018) in Flax NNX, SI at its boundary.
+"""Trajectory predictors: the `Predictor` protocol, its `InputSpec`, and the CS-LSTM.
+
+A predictor is any pytree with a `spec` (`InputSpec`: history and future length, rate, social
+grid) and a pure call `predictor(inputs) -> [B, F, 2]`; `tracks` builds its inputs to the spec.
+The shipped implementation is the CS-LSTM (Deo & Trivedi 2018) in Flax NNX, SI at its boundary.
 
 Entry points: `load_predictor` (shipped weights, a project `.msgpack`, or a published PyTorch
 checkpoint read without torch), `predict_mean` (compact neighbours) and `predict_mean_dense`
@@ -7,7 +11,7 @@ and axis conversion. CLI: `python -m diffsense.predictors {parity,card}`.
 """
 
 from diffsense.predictors._api import (
-    Predictor,
+    CSLSTMPredictor,
     init_predictor,
     load_predictor,
     predict_mean,
@@ -15,6 +19,7 @@ from diffsense.predictors._api import (
     predict_model_frame,
     select_mean,
 )
+from diffsense.predictors._protocol import CSLSTM_SPEC, InputSpec, Predictor, PredictorInputs
 from diffsense.predictors._checkpoint import read_state_dict
 from diffsense.predictors._convert import model_from_state_dict, state_dict_from_model
 from diffsense.predictors._frame import M_PER_FT, model_to_si, si_to_model
@@ -30,6 +35,10 @@ from diffsense.predictors._parity import reference_forward, reference_to_compact
 from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights, read_card, save_weights
 
 __all__ = [
+    "CSLSTM_SPEC",
+    "InputSpec",
+    "Predictor",
+    "PredictorInputs",
     "CSLSTM",
     "DEFAULT_WEIGHTS",
     "FUT_LEN",
@@ -37,7 +46,7 @@ __all__ = [
     "M_PER_FT",
     "N_SLOTS",
     "Prediction",
-    "Predictor",
+    "CSLSTMPredictor",
     "init_predictor",
     "load_predictor",
     "load_weights",

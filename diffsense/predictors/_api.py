@@ -1,6 +1,6 @@
 """The predictor's functional entry points, in SI at the boundary.
 
-`load_predictor` gives a `Predictor` pytree (graphdef static, parameters as leaves), so every
+`load_predictor` gives a `CSLSTMPredictor` pytree (graphdef static, parameters as leaves), so every
 function here is pure and can be passed through plain `jax.jit` / `jax.grad` / `jax.vmap`; the
 network is rebuilt inside with `nnx.merge` (no nnx.jit overhead in hot loops). Parameters are
 cast to the dtype of the histories: float32 in, float32 out; float64 in, float64 out.
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Literal
+from typing import ClassVar, Literal
 
 import jax
 import jax.numpy as jnp
@@ -38,6 +38,7 @@ from diffsense.errors import InputError
 from diffsense.predictors._checkpoint import read_state_dict
 from diffsense.predictors._convert import model_from_state_dict
 from diffsense.predictors._frame import model_to_si, si_to_model
+from diffsense.predictors._protocol import CSLSTM_SPEC, InputSpec, PredictorInputs
 from diffsense.predictors._model import N_LAT, CSLSTM, Prediction, new_model
 from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights
 
@@ -46,20 +47,28 @@ Mode = Literal["most_probable", "weighted"]
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
-class Predictor:
+class CSLSTMPredictor:
     """A CS-LSTM as data: `graphdef` (static structure) and `state` (its parameter arrays).
 
-    `maneuvers` is True for the manoeuvre-based variant (6 modes), False for single-mode.
+    Implements `Predictor`: `predictor(inputs)` is `predict_mean` on the inputs (the most
+    probable manoeuvre). `maneuvers` is True for the manoeuvre-based variant (6 modes), False
+    for single-mode.
     """
+
+    spec: ClassVar[InputSpec] = CSLSTM_SPEC
 
     state: nnx.State
     graphdef: nnx.GraphDef = dataclasses.field(metadata=dict(static=True))
     maneuvers: bool = dataclasses.field(metadata=dict(static=True))
 
     @classmethod
-    def from_model(cls, model: CSLSTM) -> Predictor:
+    def from_model(cls, model: CSLSTM) -> CSLSTMPredictor:
         graphdef, state = nnx.split(model)
         return cls(state=state, graphdef=graphdef, maneuvers=bool(model.maneuvers))
+
+    def __call__(self, inputs: PredictorInputs) -> Float[Array, "B 25 2"]:
+        """Future mean [B, 25, 2] in SI (the `Predictor` protocol)."""
+        return predict_mean(self, inputs.hist, inputs.nbr_hist, inputs.nbr_slot, inputs.nbr_weight)
 
     def model(self, dtype=None) -> CSLSTM:
         """The network (parameters cast to `dtype` when given); usable inside jit."""
@@ -69,12 +78,12 @@ class Predictor:
         return nnx.merge(self.graphdef, state)
 
 
-def init_predictor(maneuvers: bool = False, seed: int = 0) -> Predictor:
+def init_predictor(maneuvers: bool = False, seed: int = 0) -> CSLSTMPredictor:
     """An untrained predictor (PyTorch's default initialisation): for tests and training only."""
-    return Predictor.from_model(new_model(maneuvers, seed))
+    return CSLSTMPredictor.from_model(new_model(maneuvers, seed))
 
 
-def load_predictor(path: str | Path | None = None) -> Predictor:
+def load_predictor(path: str | Path | None = None) -> CSLSTMPredictor:
     """The default shipped predictor (`path=None`), a `.msgpack` weight file of this project, or a
     published PyTorch checkpoint (any other file; read without torch, variant from the shapes)."""
     if path is None:
@@ -83,15 +92,15 @@ def load_predictor(path: str | Path | None = None) -> Predictor:
                 f"no shipped weights at {DEFAULT_WEIGHTS}: train them with `python -m diffsense.train "
                 "--config configs/train/default.toml` or pass a checkpoint path"
             )
-        return Predictor.from_model(load_weights(DEFAULT_WEIGHTS))
+        return CSLSTMPredictor.from_model(load_weights(DEFAULT_WEIGHTS))
     path = Path(path)
     if path.suffix == ".msgpack":
-        return Predictor.from_model(load_weights(path))
-    return Predictor.from_model(model_from_state_dict(read_state_dict(path), str(path)))
+        return CSLSTMPredictor.from_model(load_weights(path))
+    return CSLSTMPredictor.from_model(model_from_state_dict(read_state_dict(path), str(path)))
 
 
 def predict_model_frame(
-    predictor: Predictor,
+    predictor: CSLSTMPredictor,
     hist: Float[Array, "B 16 2"],
     nbr_hist: Float[Array, "B N 16 2"],
     nbr_slot: Int[Array, "B N"],
@@ -116,7 +125,7 @@ def select_mean(pred: Prediction, mode: Mode = "most_probable") -> Float[Array, 
 
 
 def predict_mean(
-    predictor: Predictor,
+    predictor: CSLSTMPredictor,
     hist_m: Float[Array, "B 16 2"],
     nbr_hist_m: Float[Array, "B N 16 2"],
     nbr_slot: Int[Array, "B N"],
@@ -130,7 +139,7 @@ def predict_mean(
 
 
 def predict_mean_dense(
-    predictor: Predictor,
+    predictor: CSLSTMPredictor,
     hist_m: Float[Array, "B 16 2"],
     nbrs_m: Float[Array, "B 39 16 2"],
     occupancy: Float[Array, "B 39"],

@@ -13,7 +13,7 @@ import jax
 import numpy as np
 
 from diffsense.errors import InputError
-from diffsense.predictors._api import Predictor, predict_model_frame
+from diffsense.predictors._api import CSLSTMPredictor, predict_model_frame
 from diffsense.predictors._model import ENC_SIZE, HIST_LEN, N_CELLS, N_LANES, N_SLOTS
 
 
@@ -50,7 +50,7 @@ def reference_to_compact(hist, nbrs, mask, source: str = "inputs"):
 _forward = jax.jit(predict_model_frame)
 
 
-def reference_forward(predictor: Predictor, hist, nbrs, mask, source: str = "inputs") -> dict[str, np.ndarray]:
+def reference_forward(predictor: CSLSTMPredictor, hist, nbrs, mask, source: str = "inputs") -> dict[str, np.ndarray]:
     """What the reference highwayNet returns in evaluation mode, as numpy arrays by name."""
     pred = _forward(predictor, *reference_to_compact(hist, nbrs, mask, source))
     fut = np.asarray(pred.fut).transpose(1, 2, 0, 3)  # [K, 25, B, 5]

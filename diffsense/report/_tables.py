@@ -38,6 +38,12 @@ def _r(value: float | None, scale: float) -> str:
     return "-" if value is None else f"{value * scale:.5g}"
 
 
+def _r_star(result: Mapping[str, Any]) -> float:
+    """r* of a one-parameter result.json (a dict {param: value}, or a bare number)."""
+    r = result["r_star"]
+    return r[result["param"]] if isinstance(r, Mapping) else r
+
+
 def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = "") -> str:
     """The printed summary of one run: the sweep, then the continuous answer.
 
@@ -53,7 +59,7 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
         for p in result["sweep"]
     ]
     where = "on bound" if result["on_bound"] else "interior"
-    r_star = f"r* {_r(result['r_star'], scale)}"
+    r_star = f"r* {_r(_r_star(result), scale)}"
     rows.append([r_star, result["E_hard_star"], result["E_soft_star"], where])
     ev, wall = result["evaluations"], result["wall_s"]
     lines = [
@@ -88,7 +94,7 @@ def comparison_table(
         [f"E_hard at {_r(r, scale)}"] + [results[s]["sweep"][i]["E_hard"] for s in sensors]
         for i, r in enumerate(steps)
     ]
-    rows.append(["r*"] + [_r(results[s]["r_star"], scale) for s in sensors])
+    rows.append(["r*"] + [_r(_r_star(results[s]), scale) for s in sensors])
     rows.append(["E_hard(r*) [m]"] + [results[s]["E_hard_star"] for s in sensors])
     rows.append(["E_soft(r*) [m]"] + [results[s]["E_soft_star"] for s in sensors])
     rows.append(["r* on bound"] + [results[s]["on_bound"] for s in sensors])
@@ -98,7 +104,7 @@ def comparison_table(
             f"{' vs '.join(sensors)}: {label}, "
             "E_RMSE [m] between GT-input and sensor-input predictions",
             format_table([""] + sensors, rows),
-            f"best: {winner} at r* = {_r(results[winner]['r_star'], scale)} "
+            f"best: {winner} at r* = {_r(_r_star(results[winner]), scale)} "
             f"(E_hard = {_cell(results[winner]['E_hard_star'])} m)",
         ]
     )

@@ -22,11 +22,6 @@ from jaxtyping import Array, ArrayLike, Bool, Int
 
 from diffsense.scene._datatypes import BACKGROUND, CAR, EGO_INDEX, TARGET_INDEX, Scene
 
-GRID_CELL_M = 15.0 * 0.3048  # the CS-LSTM social grid's 15 ft cells
-GRID_HALF_LENGTH_M = 6.5 * GRID_CELL_M  # 13 cells centred on the target: +-97.5 ft = 29.7 m
-HISTORY_S = 3.0  # the CS-LSTM's history (16 points at 5 Hz)
-# Radar 4.2 m and camera 2.5 m ahead of the ego reference point (DESIGN.md, sensor mounting).
-SENSOR_REACH_M = 4.2
 # The road-frame box must contain the straight sight line, which bows in (s, d) on a bend by the
 # sagitta of a 100 m chord (the sensors' range) on the tightest shipped bend, R = 1200 m:
 # 100^2 / (8 * 1200) = 1.04 m.
@@ -35,13 +30,14 @@ MARGIN_M = 1.1
 _PAD_BEHIND_M = 1000.0
 
 
-def _window_frames(num_frames: int, frames: Int[ArrayLike, " I"] | None, dt_s: float) -> Bool[Array, " T"]:
+def _window_frames(num_frames: int, frames: Int[ArrayLike, " I"] | None, dt_s: float,
+                   history_s: float) -> Bool[Array, " T"]:
     """Frames inside the history window of some prediction instant (all frames if none given)."""
     if frames is None:
         return jnp.ones((num_frames,), bool)
     t = jnp.arange(num_frames)
     f = jnp.asarray(frames)
-    back = round(HISTORY_S / dt_s)
+    back = round(history_s / dt_s)
     return jnp.any((t[:, None] <= f[None, :]) & (t[:, None] >= f[None, :] - back), axis=-1)
 
 
@@ -49,12 +45,13 @@ def _overlap(lo_a, hi_a, lo_b, hi_b):
     return (hi_a > lo_b) & (lo_a < hi_b)
 
 
-def _relevant_one(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach_m: float) -> Bool[Array, " V"]:
+def _relevant_one(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach_m: float,
+                  grid_half_length_m: float) -> Bool[Array, " V"]:
     s, d, lane = scene.s_m, scene.d_m, scene.lane  # [T, V]
     half_l, half_w = 0.5 * scene.length_m, 0.5 * scene.width_m  # [V]
     in_grid = (
         (jnp.abs(lane - lane[:, TARGET_INDEX, None]) <= 1)
-        & (jnp.abs(s - s[:, TARGET_INDEX, None]) < GRID_HALF_LENGTH_M + margin_m)
+        & (jnp.abs(s - s[:, TARGET_INDEX, None]) < grid_half_length_m + margin_m)
         & window[:, None]
         & scene.present
     )
@@ -77,31 +74,32 @@ def _relevant_one(scene: Scene, window: Bool[Array, " T"], margin_m: float, sens
 
 
 def relevant_mask(
-    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = MARGIN_M,
-    sensor_reach_m: float = SENSOR_REACH_M,
+    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, history_s: float,
+    grid_half_length_m: float, sensor_reach_m: float, margin_m: float = MARGIN_M,
 ) -> Bool[Array, "*N V"]:
     """Which vehicles are relevant (jit-able): [V] for a scene [T, V], [N, V] for a batch.
 
-    `frames`: prediction instants (frame indices); their 3 s history windows are searched. None:
+    `frames`: prediction instants (frame indices); their history windows are searched. None:
     every frame (any instant may be asked for). `margin_m` widens the grid's length and the
     occlusion boxes (see MARGIN_M); `sensor_reach_m` is how far ahead of the ego's centre the
     sensors sit.
     """
-    window = _window_frames(scene.num_frames, frames, scene.dt_s)
-    return _mask(scene, window, margin_m, sensor_reach_m)
+    window = _window_frames(scene.num_frames, frames, scene.dt_s, history_s)
+    return _mask(scene, window, float(margin_m), float(sensor_reach_m), float(grid_half_length_m))
 
 
-@functools.partial(jax.jit, static_argnums=(2, 3))
-def _mask(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach_m: float) -> Bool[Array, "*N V"]:
-    one = lambda sc: _relevant_one(sc, window, margin_m, sensor_reach_m)  # noqa: E731
+@functools.partial(jax.jit, static_argnums=(2, 3, 4))
+def _mask(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach_m: float,
+          grid_half_length_m: float) -> Bool[Array, "*N V"]:
+    one = lambda sc: _relevant_one(sc, window, margin_m, sensor_reach_m, grid_half_length_m)  # noqa: E731
     if scene.s_m.ndim == 2:
         return one(scene)
     return jax.lax.map(one, scene)  # one scene at a time: [T, V, V] temporaries, not [N, T, V, V]
 
 
 def relevant_vehicles(
-    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, margin_m: float = MARGIN_M,
-    sensor_reach_m: float = SENSOR_REACH_M,
+    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, history_s: float,
+    grid_half_length_m: float, sensor_reach_m: float, margin_m: float = MARGIN_M,
 ) -> Scene:
     """The scene restricted to its relevant vehicles, in their original order (ego 0, target 1).
 
@@ -109,7 +107,8 @@ def relevant_vehicles(
     relevant vehicles is padded with absent ones (present False, role BACKGROUND, 1 km behind the
     ego). Not jit-able as a whole (its output size depends on the data): `relevant_mask` is.
     """
-    mask = np.asarray(relevant_mask(scene, frames, margin_m=margin_m, sensor_reach_m=sensor_reach_m))
+    mask = np.asarray(relevant_mask(scene, frames, history_s=history_s, grid_half_length_m=grid_half_length_m,
+                                    sensor_reach_m=sensor_reach_m, margin_m=margin_m))
     batched = mask.ndim == 2
     mask = mask if batched else mask[None]
     width = int(mask.sum(axis=-1).max())

@@ -1,6 +1,10 @@
-"""Sensor models: soft (differentiable) and hard radar and stereo-camera detections of a scene.
+"""Sensors: the `Sensor` protocol, radar and stereo camera, soft (differentiable) and hard.
 
-Entry points: `detect(scene, params, config, key, mode=...)` -> `Detections` [T, V] (and
+    radar = ds.sensors.Radar.from_toml()                       # shipped constants (or a user TOML)
+    det = radar.detect(scene, {"hfov_deg": 45.0}, key)        # Detections [T, V]
+    ds.sensors.register("lidar", Lidar.from_toml)             # a new sensor: one file plus a name
+
+Lower-level physics entry points: `detect(scene, params, config, key, mode=...)` -> `Detections` [T, V] (and
 `detect_batch` over [N, T, V]); `p_detect` for the probabilities alone. Parameters r are small
 pytrees (`RadarParams`, `CameraParams`); constants come from `configs/sensors/*.toml` via
 `load_config`. `param_specs` lists a sensor's differentiable parameters with their domains.
@@ -31,6 +35,8 @@ from diffsense.sensors._params import (
     param_specs,
     with_param,
 )
+from diffsense.sensors._sensor import Sensor, make_sensor, register, sensor_names
+from diffsense.sensors._suite import Camera, Radar
 from diffsense.sensors._radar import (
     radar_detect,
     radar_gain_dbi,
@@ -40,6 +46,7 @@ from diffsense.sensors._radar import (
 )
 
 __all__ = [
+    "Camera", "Radar", "Sensor", "make_sensor", "register", "sensor_names",
     "MODES", "SENSORS", "CameraConfig", "CameraParams", "CameraTemperatures", "Detections",
     "ParamSpec", "RadarConfig", "RadarParams", "RadarTemperatures", "camera_depth_sigma_m",
     "camera_detect", "camera_p_detect", "camera_px_per_rad", "check_params", "detect",

@@ -7,12 +7,14 @@
                                  ImplicitAdjoint, or the explicit formula); zero on a bound
     dense_grid_search, basin_check   the brute-force baseline and its basin cross-check
     hard_grid_solve              the hard estimator's search (no gradient): sweep + inner grid
+    Evaluator                    a pure objective compiled once, memoised and counted
 
 Objective protocol: `e2_soft(r, tau) -> E^2 [m^2]` (jax-differentiable in r; tau = 1 is the
 sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, both pure.
 """
 
 from diffsense.solve._bracketed import BracketedSecant
+from diffsense.solve._evaluator import Evaluator
 from diffsense.solve._continuous import LevelResult, SolveConfig, SolveResult, solve
 from diffsense.solve._dense import DenseGrid, basin_check, dense_grid_search
 from diffsense.solve._hard_grid import hard_grid_solve
@@ -32,6 +34,7 @@ __all__ = [
     "PAPER_HFOV_STEPS_DEG",
     "BracketedSecant",
     "DenseGrid",
+    "Evaluator",
     "LevelResult",
     "SolveConfig",
     "SolveResult",

@@ -1,17 +1,12 @@
-"""Tracks: from detections to predictor inputs (histories, fill policies, social grid)."""
+"""Tracks: from detections to what a predictor eats (histories, fill policies, social grid).
 
+Every function takes the predictor's `InputSpec` (default: the CS-LSTM's), the one place the
+history length, rate and grid are written.
+"""
+
+from diffsense.predictors import PredictorInputs
 from diffsense.tracks._fill import FILL_POLICIES, FillPolicy, fill_window
 from diffsense.tracks._inputs import (
-    FRAMES_PER_POINT,
-    FUTURE_FRAMES,
-    FUTURE_POINTS,
-    GRID_CELL_M,
-    GRID_CELLS,
-    GRID_LANES,
-    GRID_SIZE,
-    HISTORY_FRAMES,
-    HISTORY_POINTS,
-    PredictorInputs,
     build_inputs,
     flatten_instants,
     grid_slots,
@@ -21,9 +16,6 @@ from diffsense.tracks._inputs import (
 )
 
 __all__ = [
-    "FILL_POLICIES", "FillPolicy", "fill_window",
-    "FRAMES_PER_POINT", "FUTURE_FRAMES", "FUTURE_POINTS", "GRID_CELL_M", "GRID_CELLS",
-    "GRID_LANES", "GRID_SIZE", "HISTORY_FRAMES", "HISTORY_POINTS", "PredictorInputs",
-    "build_inputs", "flatten_instants", "grid_slots", "ground_truth_detections",
-    "prediction_frames", "true_future",
+    "FILL_POLICIES", "FillPolicy", "PredictorInputs", "build_inputs", "fill_window",
+    "flatten_instants", "grid_slots", "ground_truth_detections", "prediction_frames", "true_future",
 ]

@@ -18,55 +18,34 @@ comparable and a missing point under `zero` sits exactly at the target, as in th
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from diffsense.scene import TARGET_INDEX, Scene
+from diffsense.predictors import CSLSTM_SPEC, InputSpec, PredictorInputs
+from diffsense.scene import SCENE_DT_S, TARGET_INDEX, Scene
 from diffsense.sensors._datatypes import Detections
 from diffsense.tracks._fill import FillPolicy, fill_window
 
-HISTORY_POINTS = 16
-FUTURE_POINTS = 25
-FRAMES_PER_POINT = 2  # 10 Hz scene -> 5 Hz predictor
-HISTORY_FRAMES = (HISTORY_POINTS - 1) * FRAMES_PER_POINT  # 30 frames = 3 s before t
-FUTURE_FRAMES = FUTURE_POINTS * FRAMES_PER_POINT  # 50 frames = 5 s after t
-GRID_CELL_M = 15.0 * 0.3048  # 15 ft cells of the NGSIM social grid
-GRID_CELLS = 13  # longitudinal cells, centres -90 .. +90 ft
-GRID_LANES = 3  # left, own, right
-GRID_SIZE = GRID_CELLS * GRID_LANES
+
+def _frames(spec: InputSpec, scene_dt_s: float) -> tuple[int, int, int]:
+    """(frames per predictor point, history frames before t, future frames after t) [-]."""
+    step = spec.frames_per_point(scene_dt_s)
+    return step, (spec.history_points - 1) * step, spec.future_points * step
 
 
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class PredictorInputs:
-    """A batch of predictor inputs in SI, target road-aligned frame (lon forward, lat left).
-
-    Attributes:
-        hist: [B, 16, 2] target history [m].
-        nbr_hist: [B, M, 16, 2] histories of the M candidate neighbours [m].
-        nbr_slot: [B, M] grid id (lane * 13 + cell, lane 0 = left); 0 where not in the grid.
-        nbr_weight: [B, M] grid occupancy in [0, 1]; 0 where not in the grid.
-    """
-
-    hist: Float[Array, "B 16 2"]
-    nbr_hist: Float[Array, "B M 16 2"]
-    nbr_slot: Int[Array, "B M"]
-    nbr_weight: Float[Array, "B M"]
-
-
-def prediction_frames(num_frames: int, stride_frames: int = FRAMES_PER_POINT) -> np.ndarray:
-    """Frame indices with a full 3 s history and 5 s future, every `stride_frames` [-]."""
-    last = num_frames - 1 - FUTURE_FRAMES
-    if last < HISTORY_FRAMES:
+def prediction_frames(num_frames: int, stride_frames: int = 2, spec: InputSpec = CSLSTM_SPEC,
+                      scene_dt_s: float = SCENE_DT_S) -> np.ndarray:
+    """Frame indices with a full history and future of `spec`, every `stride_frames` [-]."""
+    _, history, future = _frames(spec, scene_dt_s)
+    last = num_frames - 1 - future
+    if last < history:
         raise ValueError(
-            f"a scene of {num_frames} frames is too short for a 3 s history and 5 s future "
-            f"(needs at least {HISTORY_FRAMES + FUTURE_FRAMES + 1})"
+            f"a scene of {num_frames} frames is too short for a {spec.history_s:g} s history and "
+            f"{spec.future_s:g} s future (needs at least {history + future + 1})"
         )
-    return np.arange(HISTORY_FRAMES, last + 1, stride_frames, dtype=np.int32)
+    return np.arange(history, last + 1, stride_frames, dtype=np.int32)
 
 
 def ground_truth_detections(scene: Scene) -> Detections:
@@ -93,38 +72,41 @@ def _windows(frames: Int[Array, " I"], offsets: np.ndarray) -> Int[Array, "I W"]
     return frames[:, None] + jnp.asarray(offsets)[None, :]
 
 
-def grid_slots(scene: Scene, frames: Int[Array, " I"]) -> tuple[Int[Array, "I V"], Array]:
+def grid_slots(scene: Scene, frames: Int[Array, " I"], spec: InputSpec = CSLSTM_SPEC) -> tuple[Int[Array, "I V"], Array]:
     """Grid id of every vehicle around the target at each instant, and whether it is in the grid.
 
     Lane from the ground-truth lane index (lane 0 = rightmost, so the target's left lane is
-    lane + 1); cell from the longitudinal offset along the road, rounded to 15 ft cells.
+    lane + 1); cell from the longitudinal offset along the road, rounded to the spec's cells.
     """
     lane = scene.lane[frames]  # [I, V]
     ds = scene.s_m[frames] - scene.s_m[frames, TARGET_INDEX][:, None]
     lane_offset = lane - lane[:, TARGET_INDEX][:, None]  # +1 = one lane to the left
     grid_lane = 1 - lane_offset  # 0 left, 1 own, 2 right
-    cell = jnp.round(ds / GRID_CELL_M).astype(jnp.int32) + GRID_CELLS // 2
+    cells = spec.grid_cells
+    cell = jnp.round(ds / spec.grid_cell_m).astype(jnp.int32) + cells // 2
     vehicle = jnp.arange(scene.num_vehicles)
     inside = (
         (jnp.abs(lane_offset) <= 1)
         & (cell >= 0)
-        & (cell < GRID_CELLS)
+        & (cell < cells)
         & scene.present[None, :]
         & (vehicle != TARGET_INDEX)[None, :]
     )
-    slot = jnp.where(inside, grid_lane * GRID_CELLS + cell, 0).astype(jnp.int32)
+    slot = jnp.where(inside, grid_lane * cells + cell, 0).astype(jnp.int32)
     return slot, inside
 
 
-def build_inputs(scene: Scene, det: Detections, frames: Int[Array, " I"], fill: FillPolicy) -> PredictorInputs:
+def build_inputs(scene: Scene, det: Detections, frames: Int[Array, " I"], fill: FillPolicy,
+                 spec: InputSpec = CSLSTM_SPEC) -> PredictorInputs:
     """Predictor inputs at each prediction instant of one scene (arrays [T, V]).
 
     `det` may carry soft probabilities (expected histories) or 0/1 detections (hard histories).
     Neighbour candidates are all vehicles but the target (M = V - 1), in vehicle order.
     """
     frames = jnp.asarray(frames)
+    step, history, _ = _frames(spec, scene.dt_s)
     x0, y0, theta = _target_pose(scene, frames)
-    window = _windows(frames, np.arange(-HISTORY_FRAMES, 1))  # [I, W]
+    window = _windows(frames, np.arange(-history, 1))  # [I, W]
     # [I, W, V, 2] measured points in the target frame, and [I, W, V] probabilities.
     z = _to_target_frame(
         det.x_m[window], det.y_m[window], x0[:, None, None], y0[:, None, None], theta[:, None, None]
@@ -133,12 +115,12 @@ def build_inputs(scene: Scene, det: Detections, frames: Int[Array, " I"], fill: 
     # Fill along the window axis: put it next to the coordinate axis.
     z = jnp.swapaxes(z, 1, 2)  # [I, V, W, 2]
     p = jnp.swapaxes(p, 1, 2)  # [I, V, W]
-    filled = fill_window(z, p, fill)[:, :, ::FRAMES_PER_POINT]  # [I, V, 16, 2]
+    filled = fill_window(z, p, fill)[:, :, ::step]  # [I, V, H, 2]
     if fill == "zero":
         seen = p[..., -1]
     else:
         seen = 1.0 - jnp.prod(1.0 - p, axis=-1)  # detected at least once in the window
-    slot, inside = grid_slots(scene, frames)
+    slot, inside = grid_slots(scene, frames, spec)
     others = np.array([v for v in range(scene.num_vehicles) if v != TARGET_INDEX], dtype=np.int32)
     return PredictorInputs(
         hist=filled[:, TARGET_INDEX],
@@ -148,11 +130,12 @@ def build_inputs(scene: Scene, det: Detections, frames: Int[Array, " I"], fill: 
     )
 
 
-def true_future(scene: Scene, frames: Int[Array, " I"]) -> Float[Array, "I 25 2"]:
-    """The target's true future (0.2 .. 5 s) in its road-aligned frame at each instant [m]."""
+def true_future(scene: Scene, frames: Int[Array, " I"], spec: InputSpec = CSLSTM_SPEC) -> Float[Array, "I F 2"]:
+    """The target's true future (the spec's points after t) in its road-aligned frame [m]."""
     frames = jnp.asarray(frames)
+    step, _, future = _frames(spec, scene.dt_s)
     x0, y0, theta = _target_pose(scene, frames)
-    window = _windows(frames, np.arange(FRAMES_PER_POINT, FUTURE_FRAMES + 1, FRAMES_PER_POINT))
+    window = _windows(frames, np.arange(step, future + 1, step))
     xs = scene.x_m[window, TARGET_INDEX]
     ys = scene.y_m[window, TARGET_INDEX]
     return _to_target_frame(xs, ys, x0[:, None], y0[:, None], theta[:, None])

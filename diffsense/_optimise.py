@@ -1,0 +1,160 @@
+"""The library's entry points: `objective(problem)` and `optimise(problem)` (the main job).
+
+    E = objective(problem)        # a pure equinox Module: E(r) [m], r a dict of named parameters
+    result = optimise(problem)    # stepped sweep + continuous solve + what the figures draw
+
+`python -m diffsense.optimise` calls `optimise` and writes `Result.to_json()` and the figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffsense import config as cfgio
+from diffsense._problem import Problem
+from diffsense._result import Curves, Result
+from diffsense._timing import CompileClock
+from diffsense.errors import InputError
+from diffsense.metrics import Objective, make_objective, simulate_scenes
+from diffsense.predictors import load_predictor
+from diffsense.scene import ROLE_NAMES
+from diffsense.sensors import make_sensor
+from diffsense.solve import Evaluator, basin_check, dense_grid_search, hard_grid_solve, solve
+from diffsense.tracks import prediction_frames
+
+Progress = Callable[[str], None]
+
+
+def _precision(float64: bool):
+    # The problem asks for float64: JAX computes in float32 unless x64 is on, which would make
+    # dE/dr silently wrong on flat objectives, so it is switched on here.
+    if float64 and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+    return jnp.float64 if float64 else jnp.float32
+
+
+def _predictor(problem: Problem):
+    if isinstance(problem.predictor, str):
+        return load_predictor(problem.predictor or None)
+    return problem.predictor
+
+
+def objective(problem: Problem, *, predictor: Any = None) -> Objective:
+    """E(r) of `problem`: the scenarios simulated, the sensor and predictor loaded, every random
+    draw fixed by `problem.seed`. `predictor` (optional) replaces `problem.predictor` (an
+    already loaded one, to load it once for several problems)."""
+    dtype = _precision(problem.float64)
+    sensor = make_sensor(problem.sensor)
+    predictor = _predictor(problem) if predictor is None else predictor
+    scene_key, noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))
+    scenes, index, names = simulate_scenes(
+        problem.scenarios, problem.variants, scene_key, spec=predictor.spec, sensors=[sensor],
+        stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
+        dtype=dtype)
+    frames = prediction_frames(scenes.num_frames, problem.prediction_stride_frames, predictor.spec, scenes.dt_s)
+    return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
+                          fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names)
+
+
+def _config(problem: Problem) -> dict[str, Any]:
+    fields = {f.name: getattr(problem, f.name) for f in dataclasses.fields(problem)}
+    fields["sensor"] = problem.sensor_kind
+    if not isinstance(problem.predictor, str):
+        fields["predictor"] = type(problem.predictor).__name__
+    fields["params"] = {k: list(v) for k, v in problem.params.items()}
+    return cfgio.to_dict(fields)
+
+
+def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: int, hard_only: bool) -> Curves:
+    tau = result.tau_schedule[-1] if result.tau_schedule else 1.0
+    r_curve = sorted({p.r for p in result.sweep} | {result.r_star}
+                     | {float(r) for r in (np.linspace(lo, hi, extra) if extra else [])})
+    soft, grad, hard = [], [], []
+    for r in r_curve:
+        e2, g = (ev.e_hard(r) ** 2, 0.0) if hard_only else (ev.value_and_grad(r, tau)[0], ev.value_and_grad(r, tau)[1][0])
+        e = math.sqrt(max(e2, 0.0))
+        soft.append(e)
+        grad.append(g / (2 * e) if e > 0 else 0.0)  # dE/dr = dE^2/dr / (2E)
+        hard.append(ev.e_hard(r))
+    gt, sensor = {}, {}
+    for r in [p.r for p in result.sweep]:
+        h = ev.hard(r)
+        for i, name in enumerate(E.scenario_names):
+            gt[name] = h.rmse_gt[i]
+            sensor.setdefault(name, {})[r] = h.rmse_sensor[i]
+    first = jax.tree.map(lambda a: np.asarray(a[0]), E.data.scenes)  # nominal variant, first scenario
+    cols = [v for v in range(1, first.present.size) if first.present[v]]  # the ego knows itself
+    timeline = {r: np.asarray(ev.detections(r).p_detect[0])[:, cols] for r in sorted({lo, result.r_star, hi})}
+    return Curves(r=tuple(r_curve), E_soft=tuple(soft), E_hard=tuple(hard), dE_dr=tuple(grad),
+                  horizon_gt=gt, horizon_sensor=sensor, horizon_s=E.spec.horizon_s(), timeline=timeline,
+                  timeline_roles=tuple(ROLE_NAMES[int(first.role[v])] for v in cols), dt_s=float(first.dt_s))
+
+
+def _dense_check(ev: Evaluator, result, lo: float, hi: float, step: float) -> dict[str, Any]:
+    """E_hard on a dense grid and whether r* lies in the basin of its best point."""
+    dense = dense_grid_search(ev.e_hard, (lo, hi), step)
+    why = basin_check(dense, result.r_star, result.E_hard_star, result.bracket)
+    i = dense.best_index
+    return {
+        "step": step, "evaluations": dense.evaluations, "wall_s": dense.wall_s,
+        "r_best": float(dense.r[i]), "E_hard_best": float(dense.E_hard[i]),
+        "basin": list(dense.basin()), "in_basin": why is None,
+        "E_hard_star_minus_best": result.E_hard_star - float(dense.E_hard[i]),
+        "verdict": why or f"r* lies in the basin {list(dense.basin())} of the best dense point "
+                          f"r={float(dense.r[i]):.6g}",
+    }
+
+
+def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = None, figures: bool = True,
+             progress: Progress | None = None) -> Result:
+    """The main job: argmin of E over the problem's box, cross-checked by the stepped sweep.
+
+    One-parameter problems: the stepped sweep on E_hard, then the continuous solve inside the
+    best step's bracket (`diffsense.solve.solve`; the hard estimator searches an inner grid
+    instead), the answer chosen on E_hard. With `figures`, the evaluations the figures draw
+    are made too (`Result.curves`); with `problem.dense_check`, a dense E_hard grid.
+    `E` reuses an already built `objective(problem)`; `predictor` an already loaded predictor.
+    """
+    say = progress or (lambda message: None)
+    if len(problem.params) != 1:
+        raise InputError(f"optimise solves one-parameter problems; got {len(problem.params)} "
+                         f"parameters ({', '.join(problem.params)})")
+    (name, (lo, hi)), = problem.params.items()
+    spec = problem.specs()[name]
+    hard_only = problem.estimator.kind == "hard"
+    with CompileClock() as clock:
+        say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
+            "ground-truth predictions")
+        E = objective(problem, predictor=predictor) if E is None else E
+        ev = Evaluator(E)
+        say(f"{problem.sensor_kind}: stepped sweep and {'hard grid' if hard_only else 'continuous solve'} "
+            f"of {name} over [{lo:g}, {hi:g}] {spec.unit}")
+        if hard_only:
+            result = hard_grid_solve(ev.e_hard, (lo, hi), steps=problem.steps,
+                                     max_evaluations=problem.solve.max_evaluations)
+        else:
+            e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
+            result = solve(e2_soft, e_hard, (lo, hi), steps=problem.steps, config=problem.solve)
+        solve_counts = dict(ev.counts)
+        say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, E_hard(r*) = {result.E_hard_star:.4f} m")
+        curves = _curves(ev, E, result, lo, hi, problem.extra_curve_points, hard_only) if figures else None
+    figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
+    dense = None
+    if problem.dense_check is not None:
+        say(f"{problem.sensor_kind}: dense hard grid every {problem.dense_check:g} {spec.unit}")
+        dense = _dense_check(ev, result, lo, hi, problem.dense_check)
+        result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + dense["verdict"]))
+    return Result(
+        sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
+        r_star={name: float(result.r_star)}, E_hard_star=float(result.E_hard_star),
+        E_soft_star=float(result.E_soft_star), solve=result,
+        programs_run={"solve": solve_counts, "figures": figure_counts},
+        wall_s={"compile": clock.compile_s, "run": clock.run_s}, scenarios=tuple(E.scenario_names),
+        config=_config(problem), curves=curves, dense_check=dense)

@@ -1,0 +1,244 @@
+"""`Problem`: what to optimise (sensor, named parameters with bounds) and over what (scenes).
+
+A Problem is plain, frozen data: building it simulates nothing. `diffsense.objective(problem)`
+turns it into E(r); `diffsense.optimise(problem)` runs the main job on it. `Problem.from_toml`
+reads the layout of `configs/optimise/default.toml`; a file may be partial, and the keys it
+leaves out keep the shipped defaults.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from diffsense import config as cfgio
+from diffsense.errors import InputError
+from diffsense.metrics import PAPER_SCENARIOS, EstimatorConfig
+from diffsense.predictors import Predictor
+from diffsense.sensors import Sensor, make_sensor
+from diffsense.sensors._params import ParamSpec
+from diffsense.solve import SolveConfig
+from diffsense.tracks import FILL_POLICIES
+
+_MAX_SEED = 2**32 - 1
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """An optimisation problem: argmin over r in the box `params` of E(r).
+
+    Attributes:
+        sensor: a registered sensor name ("radar", "camera") or a `diffsense.sensors.Sensor`.
+        params: {name: (lo, hi)}: the free parameters and their bounds, in the units their names
+            carry ("hfov_deg": degrees). Short names ("hfov") are resolved to the sensor's.
+        scenarios: scenario names or TOML paths.
+        variants: scene variants per scenario (variant 0 nominal, the rest randomised) [-].
+        seed: fixes scene variants, measurement noise and Monte-Carlo draws.
+        predictor: "" for the shipped CS-LSTM weights, a weight/checkpoint path, or any object
+            implementing `diffsense.predictors.Predictor`.
+        fill: missing-detection policy: "zero", "hold" or "interp".
+        estimator: how detection uncertainty enters ("mean-field", "mc", "hard", or an
+            `EstimatorConfig` with its knobs).
+        prediction_stride_frames: one prediction instant every this many scene frames [-].
+        background_vehicles: if > 0, replaces every scenario's count of far background vehicles.
+        float64: compute E(r) in float64 (enables JAX's x64 mode when needed).
+        steps: the stepped sweep's points (one-parameter problems; None: the default steps).
+        solve: settings of the continuous solve.
+        dense_check: if set, `optimise` also evaluates E_hard every this many parameter units.
+        extra_curve_points: evenly spaced extra E(r) points evaluated for the objective figure.
+    """
+
+    sensor: str | Sensor = "radar"
+    params: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=lambda: {"hfov_deg": (30.0, 180.0)})
+    scenarios: Sequence[str] = PAPER_SCENARIOS
+    variants: int = 8
+    seed: int = 0
+    predictor: str | Predictor = ""
+    fill: str = "hold"
+    estimator: str | EstimatorConfig = "mean-field"
+    prediction_stride_frames: int = 4
+    background_vehicles: int = 0
+    float64: bool = True
+    steps: Sequence[float] | None = None
+    solve: SolveConfig = SolveConfig()
+    dense_check: float | None = None
+    extra_curve_points: int = 0
+
+    def __post_init__(self):
+        sensor = make_sensor(self.sensor)
+        set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        set_("params", _resolve_params(sensor, self.params))
+        names = self.scenarios.split(",") if isinstance(self.scenarios, str) else list(self.scenarios)
+        names = [str(n).strip() for n in names]
+        if not names or not all(names):
+            raise InputError("at least one scenario is needed (an empty name was given)")
+        if len(set(names)) != len(names):
+            raise InputError(f"scenario named twice: {sorted(n for n in set(names) if names.count(n) > 1)[0]}")
+        set_("scenarios", tuple(names))
+        if isinstance(self.estimator, str):
+            set_("estimator", EstimatorConfig(kind=self.estimator))
+        _check_int("variants", self.variants, 1, 100_000)
+        _check_int("seed", self.seed, 0, _MAX_SEED)
+        _check_int("prediction_stride_frames", self.prediction_stride_frames, 1, 1000)
+        _check_int("background_vehicles", self.background_vehicles, 0, 10_000)
+        _check_int("extra_curve_points", self.extra_curve_points, 0, 1000)
+        if self.fill not in FILL_POLICIES:
+            raise InputError(f"unknown fill {self.fill!r} (known: {', '.join(FILL_POLICIES)})")
+        if self.steps is not None:
+            if len(self.params) != 1:
+                raise InputError("steps apply to one-parameter problems only")
+            set_("steps", tuple(_finite(v, "steps") for v in self.steps))
+        if self.dense_check is not None and not (math.isfinite(self.dense_check) and self.dense_check > 0):
+            raise InputError(f"dense_check must be a positive step, got {self.dense_check}")
+        if self.dense_check is not None:
+            for lo, hi in self.params.values():
+                if (hi - lo) / self.dense_check > 100_000:
+                    raise InputError(f"dense_check {self.dense_check:g} makes over 100,000 points on [{lo:g}, {hi:g}]")
+
+    @property
+    def sensor_kind(self) -> str:
+        """The sensor's short name ("radar", "camera", or a custom sensor's)."""
+        return make_sensor(self.sensor).kind
+
+    def specs(self) -> dict[str, ParamSpec]:
+        """The spec (unit, domain, default) of every free parameter."""
+        sensor = make_sensor(self.sensor)
+        return {name: sensor.spec(name) for name in self.params}
+
+    @classmethod
+    def from_toml(cls, path: str | Path | None = None, **overrides: Any) -> Problem:
+        """A problem from a TOML in the layout of `configs/optimise/default.toml` (None: that
+        file). Keys the file leaves out keep the shipped defaults; `overrides` replace fields."""
+        return cls(**problem_fields(load_settings(path)) | overrides)
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise InputError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+
+
+def _finite(value: Any, what: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be numbers, got {value!r}") from None
+    if not math.isfinite(v):
+        raise InputError(f"{what} must be finite numbers, got {value!r}")
+    return v
+
+
+def resolve_name(sensor: Sensor, name: str) -> str:
+    """A parameter's full name from a full ("hfov_deg"), short ("hfov") or qualified
+    ("radar.hfov_deg") one; InputError naming the known ones otherwise."""
+    if "." in name:
+        kind, name = name.split(".", 1)
+        if kind != sensor.kind:
+            raise InputError(f"parameter {kind}.{name} names sensor {kind!r}, not in this problem ({sensor.kind})")
+    specs = [s.name for s in sensor.param_specs()]
+    if name in specs:
+        return name
+    short = {s.rsplit("_", 1)[0]: s for s in specs}
+    if name in short:
+        return short[name]
+    known = ", ".join(f"{k} ({v})" for k, v in short.items())
+    raise InputError(f"unknown {sensor.kind} parameter {name!r} (known: {known})")
+
+
+def _resolve_params(sensor: Sensor, params: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
+    if not isinstance(params, Mapping) or not params:
+        raise InputError("params must name at least one parameter with its bounds, e.g. {'hfov_deg': (30, 180)}")
+    out: dict[str, tuple[float, float]] = {}
+    for raw, bounds in params.items():
+        name = resolve_name(sensor, str(raw))
+        if name in out:
+            raise InputError(f"parameter {name} is named twice")
+        try:
+            lo, hi = (_finite(b, f"bounds of {name}") for b in bounds)
+        except (TypeError, ValueError):
+            raise InputError(f"bounds of {name} must be two numbers (lo, hi), got {bounds!r}") from None
+        if not lo < hi:
+            raise InputError(f"bounds of {name} must have lo < hi, got {lo:g} {hi:g}")
+        spec = sensor.spec(name)
+        for value in (lo, hi):
+            if not spec.contains(value):
+                raise InputError(f"bounds {lo:g} {hi:g} are outside the domain of {name}: {spec.describe()}")
+        out[name] = (lo, hi)
+    return out
+
+
+# -- the TOML layout of configs/optimise/default.toml -----------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class ProblemSection:
+    """[problem] of an optimise config (see configs/optimise/default.toml for each key)."""
+
+    sensor: str = "radar"
+    param: str = "hfov_deg"
+    scenarios: tuple[str, ...] = PAPER_SCENARIOS
+    variants: int = 8
+    model: str = ""
+    fill: str = "hold"
+    estimator: EstimatorConfig = EstimatorConfig()
+    seed: int = 0
+    prediction_stride_frames: int = 4
+    background_vehicles: int = 0
+    float64: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class PlotsSection:
+    """[plots]: extra_curve_points, E(r) points drawn beyond the sweep steps and r* [-]."""
+
+    extra_curve_points: int = 0
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """A whole optimise config: the problem, the solver, the figures, the default intervals."""
+
+    problem: ProblemSection = ProblemSection()
+    solve: SolveConfig = SolveConfig()
+    plots: PlotsSection = PlotsSection()
+    intervals: dict[str, dict[str, tuple[float, float]]] = dataclasses.field(default_factory=dict)
+
+
+def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in extra.items():
+        out[key] = _merge(base[key], value) if isinstance(value, dict) and isinstance(base.get(key), dict) else value
+    return out
+
+
+def load_settings(path: str | Path | None = None) -> Settings:
+    """The shipped optimise config, with the keys of the TOML at `path` (if any) replacing its."""
+    defaults = cfgio.parse_toml(cfgio.default_text("optimise/default.toml"), "configs/optimise/default.toml")
+    if path is None:
+        return cfgio.from_dict(Settings, defaults)
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"cannot read config {path}: {e.strerror if isinstance(e, OSError) else e}") from None
+    try:
+        return cfgio.from_dict(Settings, _merge(defaults, cfgio.parse_toml(text, str(path))))
+    except InputError as e:
+        msg = str(e)
+        raise InputError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from None
+
+
+def problem_fields(settings: Settings, sensor: str | None = None, param: str | None = None,
+                   interval: tuple[float, float] | None = None) -> dict[str, Any]:
+    """The `Problem` keyword arguments a config describes (sensor, param, interval overridable)."""
+    p = settings.problem
+    sensor = sensor or p.sensor
+    name = resolve_name(make_sensor(sensor), param or p.param)
+    if interval is None:
+        interval = settings.intervals.get(sensor, {}).get(name)
+        if interval is None:
+            raise InputError(f"no interval for {sensor} {name}: give one (--interval LO HI, or [intervals.{sensor}])")
+    return dict(sensor=sensor, params={name: tuple(interval)}, scenarios=p.scenarios, variants=p.variants,
+                seed=p.seed, predictor=p.model, fill=p.fill, estimator=p.estimator,
+                prediction_stride_frames=p.prediction_stride_frames, background_vehicles=p.background_vehicles,
+                float64=p.float64, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)

@@ -1,0 +1,171 @@
+"""`Result`: what `diffsense.optimise` found, and the result.json it writes.
+
+result.json schema (every key always present; non-finite numbers are written as null):
+
+    "sensor"        string   the sensor's kind ("radar", "camera", ...)
+    "params"        {name: [lo, hi]}     the free parameters and their bounds (their own units)
+    "units"         {name: string}       unit of each parameter
+    "param"         string   the parameter of a one-parameter problem (null otherwise)
+    "interval"      [lo, hi] its bounds (null otherwise)
+    "r_star"        {name: number}       the answer
+    "E_soft_star"   number   E at r* with the estimator at the final temperature [m]
+    "E_hard_star"   number   E at r* with hard detections [m]; <= every sweep step's E_hard
+    "sweep"         [{"r": number, "E_hard": m, "E_soft": m}, ...]   the stepped sweep
+    "evaluations"   {"objective": int, "gradient": int}  of the continuous solve (sweep excluded)
+    "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...}}  compiled-program
+                             runs (memoised points are not run again)
+    "wall_s"        {"compile": s, "run": s}
+    "on_bound"      bool     r* is an end of the interval (then dr*/dtheta = 0)
+    "bracket"       [lo, hi] where the continuous solve searched
+    "tau_schedule"  [number, ...]  temperature multipliers of the continuation, largest first
+    "notes"         [string, ...]  why the answer is what it is, when that needs saying
+    "scenarios"     [string, ...]
+    "config"        object   the problem as plain JSON
+    "versions"      {"python", "jax", ..., "diffsense": string}
+    "dense_check"   object   only with Problem.dense_check (see `diffsense.optimise`)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.metadata
+import math
+import platform
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+import diffsense
+from diffsense.solve import SolveResult
+
+_PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
+
+
+def versions() -> dict[str, str]:
+    """Versions of Python, the numerical packages and diffsense."""
+    out = {"python": platform.python_version()}
+    for name in _PACKAGES:
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            out[name] = "not installed"
+    out["diffsense"] = diffsense.__version__
+    return out
+
+
+def plain(value: Any) -> Any:
+    """JSON-ready: tuples to lists, numpy scalars to Python, non-finite floats to None."""
+    if isinstance(value, Mapping):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy / jax arrays and scalars
+        return plain(value.tolist())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
+
+
+@dataclasses.dataclass(frozen=True)
+class Curves:
+    """What the figures draw, from evaluations the run made (nothing interpolated).
+
+    Attributes:
+        r: [n] parameter values evaluated, ascending.
+        E_soft, E_hard, dE_dr: [n] E [m] (soft at the final temperature; for the hard estimator
+            E_soft repeats E_hard) and dE/dr [m per unit] at each r.
+        horizon_gt: {scenario: [F]} RMSE of the ground-truth-input prediction against the true
+            future, per horizon step [m].
+        horizon_sensor: {scenario: {r: [F]}} the same for the sensor-input prediction, per step.
+        horizon_s: [F] time of each horizon step [s].
+        timeline: {r: [T, K]} hard detections of the nominal variant of the first scenario.
+        timeline_roles: [K] the role of each column of the timeline.
+        dt_s: frame period of the timeline [s].
+    """
+
+    r: tuple[float, ...]
+    E_soft: tuple[float, ...]
+    E_hard: tuple[float, ...]
+    dE_dr: tuple[float, ...]
+    horizon_gt: dict[str, np.ndarray]
+    horizon_sensor: dict[str, dict[float, np.ndarray]]
+    horizon_s: tuple[float, ...]
+    timeline: dict[float, np.ndarray]
+    timeline_roles: tuple[str, ...]
+    dt_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Result:
+    """The answer of `diffsense.optimise`, with everything that explains it.
+
+    `r_star` is a dict like r (`{"hfov_deg": 30.2}`); `solve` is the one-parameter solver's
+    full record (sweep, levels, bracket); `to_json()` is the result.json content.
+    """
+
+    sensor: str
+    params: dict[str, tuple[float, float]]
+    units: dict[str, str]
+    r_star: dict[str, float]
+    E_hard_star: float
+    E_soft_star: float
+    solve: SolveResult
+    programs_run: dict[str, dict[str, int]]
+    wall_s: dict[str, float]
+    scenarios: tuple[str, ...]
+    config: dict[str, Any]
+    curves: Curves | None = None
+    dense_check: dict[str, Any] | None = None
+
+    @property
+    def sweep(self):
+        return self.solve.sweep
+
+    @property
+    def evaluations(self) -> dict[str, int]:
+        return dict(self.solve.evaluations)
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        return self.solve.notes
+
+    @property
+    def on_bound(self) -> bool:
+        return self.solve.on_bound
+
+    @property
+    def param(self) -> str | None:
+        """The parameter of a one-parameter problem."""
+        return next(iter(self.params)) if len(self.params) == 1 else None
+
+    def to_json(self) -> dict[str, Any]:
+        """The result.json content (module docstring), JSON-ready."""
+        name = self.param
+        s = self.solve
+        out = {
+            "sensor": self.sensor,
+            "params": {k: list(v) for k, v in self.params.items()},
+            "units": dict(self.units),
+            "param": name,
+            "interval": list(self.params[name]) if name else None,
+            "r_star": dict(self.r_star),
+            "E_soft_star": self.E_soft_star,
+            "E_hard_star": self.E_hard_star,
+            "sweep": [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft} for p in s.sweep],
+            "evaluations": {k: s.evaluations[k] for k in ("objective", "gradient")},
+            "programs_run": self.programs_run,
+            "wall_s": dict(self.wall_s),
+            "on_bound": s.on_bound,
+            "bracket": list(s.bracket),
+            "tau_schedule": list(s.tau_schedule),
+            "notes": list(s.notes),
+            "scenarios": list(self.scenarios),
+            "config": self.config,
+            "versions": versions(),
+        }
+        if self.dense_check is not None:
+            out["dense_check"] = self.dense_check
+        return plain(out)

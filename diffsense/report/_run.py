@@ -1,0 +1,31 @@
+"""A run's outputs from a `diffsense.Result`: result.json and the three figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from diffsense._io import write_json
+from diffsense.report._figures import plot_detection_timeline, plot_objective, plot_rmse_horizon
+
+RUN_FILES = ("result.json", "objective.png", "rmse_horizon.png", "detections.png")
+
+
+def write_run(result: Any, folder: str | Path) -> dict[str, Any]:
+    """Write result.json and, when the result has curves, objective.png, rmse_horizon.png and
+    detections.png into `folder`; returns the result.json content."""
+    folder = Path(folder)
+    content = result.to_json()
+    write_json(folder / "result.json", content)
+    c = result.curves
+    if c is None:
+        return content
+    name, unit = result.param, result.units[result.param]
+    sweep = [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft} for p in result.sweep]
+    plot_objective(folder / "objective.png", c.r, c.E_soft, c.E_hard, c.dE_dr, sweep, result.r_star[name],
+                   param=name, unit=unit)
+    curves = {s: {"gt": c.horizon_gt[s], "steps": c.horizon_sensor[s]} for s in c.horizon_gt}
+    plot_rmse_horizon(folder / "rmse_horizon.png", curves, param=name, unit=unit)
+    plot_detection_timeline(folder / "detections.png", c.timeline, c.timeline_roles, dt_s=c.dt_s,
+                            param=name, unit=unit)
+    return content

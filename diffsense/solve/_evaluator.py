@@ -1,0 +1,112 @@
+"""The solver's thin wrapper around a pure objective: compiled once, memoised, counted.
+
+The objective (`diffsense.metrics.Objective`) is pure and stateless; a solve asks for the same
+point more than once (a sweep step again for a figure, the answer's hard value), so the wrapper
+keeps every evaluation by (r, tau), counts the programs actually run, and compiles exactly
+three programs per objective: the soft value-and-gradient, the hard evaluation and the
+detections. The objective is an argument of each program, never a closure, so XLA does not fold
+its data in as constants.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+@eqx.filter_jit
+def _value_and_grad(objective, x, tau):
+    return jax.value_and_grad(lambda v: objective.e2(objective.point(v), tau))(x)
+
+
+@eqx.filter_jit
+def _hard(objective, x):
+    return objective.hard(objective.point(x))
+
+
+@eqx.filter_jit
+def _detections(objective, x, tau, mode):
+    return objective.detections(objective.point(x), mode, tau)
+
+
+class Evaluator:
+    """Evaluations of `objective` at points x (values of `objective.names`, in that order).
+
+    `counts` holds how many soft and hard programs have run; asking again for an evaluated
+    point costs nothing. One-parameter problems may pass x as a float.
+    """
+
+    def __init__(self, objective: Any, progress: Callable[[str, float, float], None] | None = None):
+        self.objective = objective
+        self.dtype = objective.dtype
+        self.counts = {"soft": 0, "hard": 0}
+        self._soft: dict[tuple, tuple[float, np.ndarray]] = {}
+        self._hard: dict[tuple, Any] = {}
+        self._progress = progress
+
+    def _key(self, x) -> tuple[float, ...]:
+        return tuple(float(v) for v in np.atleast_1d(np.asarray(x, dtype=np.float64)))
+
+    def value_and_grad(self, x, tau: float = 1.0) -> tuple[float, np.ndarray]:
+        """Soft E^2 [m^2] and its gradient with respect to x, gate temperatures scaled by tau."""
+        key = (self._key(x), float(tau))
+        if key not in self._soft:
+            self.counts["soft"] += 1
+            v, g = _value_and_grad(self.objective, jnp.asarray(key[0], self.dtype), jnp.asarray(key[1], self.dtype))
+            self._soft[key] = (float(v), np.asarray(g, np.float64))
+            if self._progress:
+                self._progress("soft", float(np.sqrt(max(float(v), 0.0))), key[1])
+        return self._soft[key]
+
+    def hard(self, x):
+        """The hard evaluation (`HardEvaluation`, numpy leaves) at x."""
+        key = self._key(x)
+        if key not in self._hard:
+            self.counts["hard"] += 1
+            out = _hard(self.objective, jnp.asarray(key, self.dtype))
+            self._hard[key] = jax.tree.map(np.asarray, out)
+            if self._progress:
+                self._progress("hard", float(np.sqrt(max(float(out.e2), 0.0))), 0.0)
+        return self._hard[key]
+
+    def e_hard(self, x) -> float:
+        """E [m] with hard (0/1) detections."""
+        return float(np.sqrt(max(float(self.hard(x).e2), 0.0)))
+
+    def e2_soft(self, x, tau: float = 1.0) -> float:
+        return self.value_and_grad(x, tau)[0]
+
+    def detections(self, x, mode: str = "hard", tau: float = 1.0):
+        return _detections(self.objective, jnp.asarray(self._key(x), self.dtype), jnp.asarray(tau, self.dtype), mode)
+
+    def solver_fns(self, dtype=jnp.float64) -> tuple[Callable[[Any, Any], Any], Callable[[Any], float]]:
+        """(e2_soft, e_hard) of a one-parameter objective in the form `diffsense.solve.solve` takes.
+
+        `e2_soft(r, tau)` is traceable and differentiable in r; inside a compiled solver loop it
+        reaches this wrapper's compiled program through a host callback, so the loop does not
+        compile the objective a second time and every evaluation is memoised and counted here.
+        """
+        spec = jax.ShapeDtypeStruct((), dtype)
+
+        def host(r, tau):
+            v, g = self.value_and_grad(float(r), float(tau))
+            return np.asarray(v, dtype), np.asarray(g[0], dtype)
+
+        def call(r, tau):
+            return jax.pure_callback(host, (spec, spec), r, tau)
+
+        @jax.custom_jvp
+        def e2_soft(r, tau):
+            return call(r, tau)[0]
+
+        @e2_soft.defjvp
+        def _jvp(primals, tangents):
+            v, g = call(*primals)
+            return v, g * tangents[0]
+
+        return e2_soft, lambda r: self.e_hard(float(r))
