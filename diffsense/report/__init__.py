@@ -5,15 +5,18 @@
     plot_detection_timeline          the paper's Figs 8/9: p_detect over time per vehicle
     summary_table, comparison_table  plain-text tables (run summary; radar vs camera)
     write_run                        result.json (schema: `diffsense.Result`) and the three figures
+    CompileClock                     wall time split into JAX compilation and the rest
 
 Everything is written atomically (diffsense._io).
 """
 
+from diffsense._timing import CompileClock
 from diffsense.report._figures import plot_detection_timeline, plot_objective, plot_rmse_horizon
 from diffsense.report._run import RUN_FILES, write_run
 from diffsense.report._tables import comparison_table, format_table, summary_table
 
 __all__ = [
+    "CompileClock",
     "RUN_FILES",
     "write_run",
     "comparison_table",
