@@ -40,6 +40,9 @@ import diffsense
 from diffsense.solve import SolveResult
 
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
+RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "sweep",
+               "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
+               "scenarios", "config", "versions")
 
 
 def versions() -> dict[str, str]:

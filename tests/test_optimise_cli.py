@@ -42,15 +42,18 @@ def _run(argv, capsys) -> tuple[int, str]:
     [
         (["--param", "warp"], "unknown radar parameter 'warp'"),
         (["--param", "width", "--sensor", "radar"], "unknown radar parameter 'width'"),
-        (["--interval", "180", "30"], "LO < HI"),
+        (["--interval", "180", "30"], "lo < hi"),
         (["--interval", "30", "400"], "outside the domain of hfov_deg"),
         (["--param", "range", "--interval", "-5", "100"], "outside the domain of range_m"),
         (["--scenarios", "sc99"], "unknown scenario 'sc99'"),
-        (["--variants", "0"], "variants must be >= 1"),
+        (["--variants", "0"], "variants must be an integer in [1,"),
+        (["--scenarios", "sc01,sc01"], "scenario named twice: sc01"),
+        (["--scenarios", ""], "empty name"),
+        (["--seed", "9223372036854775808"], "seed must be an integer"),
         (["--steps", "30,abc"], "--steps must be comma-separated numbers"),
         (["--tau", "-1"], "--tau must be a positive number"),
         (["--model", "/nonexistent/weights.msgpack"], "/nonexistent/weights.msgpack"),
-        (["--dense-check", "0"], "--dense-check must be a positive step"),
+        (["--dense-check", "0"], "dense_check must be a positive step"),
         (["--dense-check", "1e-6"], "over 100,000 points"),
     ],
 )
@@ -102,6 +105,7 @@ def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
                 "evaluations", "wall_s", "on_bound", "config", "versions"):
         assert key in result
     assert result["param"] == "hfov_deg" and result["interval"] == [30.0, 180.0]
+    assert set(result["r_star"]) == {"hfov_deg"} and result["units"] == {"hfov_deg": "deg"}
     assert [p["r"] for p in result["sweep"]] == [30.0, 105.0, 180.0]
     assert result["E_hard_star"] <= min(p["E_hard"] for p in result["sweep"])
     assert result["evaluations"]["objective"] + result["evaluations"]["gradient"] <= 20
@@ -119,16 +123,16 @@ def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
 
 
 def test_config_file_values_reach_the_run_and_flags_override_them(tmp_path):
-    from diffsense.cli.optimise import _load_config, _parser
+    from diffsense.cli.optimise import _parser, problems
 
-    text = (ROOT / "configs/optimise/default.toml").read_text()
-    text = text.replace("variants = 8", "variants = 3").replace("prediction_stride_frames = 4", "prediction_stride_frames = 6")
     path = tmp_path / "mine.toml"
-    path.write_text(text)
-    cfg = _load_config(_parser().parse_args(["--config", str(path)]))
-    assert cfg.problem.variants == 3 and cfg.problem.prediction_stride_frames == 6
-    cfg = _load_config(_parser().parse_args(["--config", str(path), "--variants", "5", "--fill", "zero"]))
-    assert cfg.problem.variants == 5 and cfg.problem.fill == "zero" and cfg.problem.prediction_stride_frames == 6
+    path.write_text("[problem]\nvariants = 3\nprediction_stride_frames = 6\n")  # a partial config
+    (p,) = problems(_parser().parse_args(["--config", str(path)]))
+    assert p.variants == 3 and p.prediction_stride_frames == 6 and p.params == {"hfov_deg": (30.0, 180.0)}
+    (p,) = problems(_parser().parse_args(["--config", str(path), "--variants", "5", "--fill", "zero"]))
+    assert p.variants == 5 and p.fill == "zero" and p.prediction_stride_frames == 6
+    (p,) = problems(_parser().parse_args(["--param", "range", "--tau", "0.5"]))
+    assert p.params == {"range_m": (30.0, 200.0)} and p.solve.tau_schedule == (2.0, 1.0, 0.5)
 
 
 @pytest.mark.slow
@@ -140,15 +144,15 @@ def test_hard_estimator_searches_the_best_bracket(weights, tmp_path, capsys):
     result = json.loads((out / "result.json").read_text())
     assert result["evaluations"] == {"objective": 20, "gradient": 0}
     assert result["E_hard_star"] <= min(p["E_hard"] for p in result["sweep"])
-    assert result["bracket"][0] <= result["r_star"] <= result["bracket"][1]
+    assert result["bracket"][0] <= result["r_star"]["hfov_deg"] <= result["bracket"][1]
     assert result["notes"][0].startswith("hard estimator: no gradient")
 
 
 def test_reserve_polish_config_is_the_default_but_for_that_key():
     from diffsense import config as cfgio
-    from diffsense.cli.optimise import OptimiseConfig
+    from diffsense._problem import load_settings
 
-    default = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
-    reserve = cfgio.load(OptimiseConfig, ROOT / "configs/optimise/reserve_polish.toml")
+    default = load_settings()
+    reserve = load_settings(ROOT / "configs/optimise/reserve_polish.toml")
     assert not default.solve.reserve_polish and reserve.solve.reserve_polish
     assert cfgio.replace(reserve, solve=cfgio.replace(reserve.solve, reserve_polish=False)) == default

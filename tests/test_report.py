@@ -9,15 +9,14 @@ import jax
 import numpy as np
 import pytest
 
+from diffsense._io import write_json
+from diffsense._result import RESULT_KEYS, Result
 from diffsense.report import (
-    RESULT_KEYS,
     comparison_table,
     plot_detection_timeline,
     plot_objective,
     plot_rmse_horizon,
-    result_dict,
     summary_table,
-    write_result_json,
 )
 from diffsense.solve import SolveConfig, solve
 from tests._analytic_objectives import HI, LO, bowl, staircase
@@ -25,16 +24,13 @@ from tests._analytic_objectives import HI, LO, bowl, staircase
 DEG = 180.0 / math.pi
 
 
-def _record(res, sensor, extra=None):
-    return result_dict(
-        res,
-        param="hfov",
-        sensor=sensor,
-        r_unit="rad",
-        wall_s={"compile": 1.5, "run": 0.25},
-        config={"solve": {"tau_schedule": [4.0, 2.0, 1.0]}, "seed": 0},
-        extra=extra,
-    )
+def _result(res, sensor, **changes):
+    fields = dict(sensor=sensor, params={"hfov": (LO, HI)}, units={"hfov": "rad"}, r_star={"hfov": res.r_star},
+                  E_hard_star=res.E_hard_star, E_soft_star=res.E_soft_star, solve=res,
+                  programs_run={"solve": {"soft": 3, "hard": 2}, "figures": {"soft": 0, "hard": 0}},
+                  wall_s={"compile": 1.5, "run": 0.25}, scenarios=("sc01",),
+                  config={"solve": {"tau_schedule": [4.0, 2.0, 1.0]}, "seed": 0})
+    return Result(**(fields | changes))
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +42,7 @@ def solved():
 
 @pytest.fixture(scope="module")
 def results(solved):
-    return {s: _record(res, s, extra={"basin": None}) for s, res in solved.items()}
+    return {s: _result(res, s).to_json() for s, res in solved.items()}
 
 
 def _no_temp_files(folder):
@@ -56,9 +52,9 @@ def _no_temp_files(folder):
 
 def test_result_json_has_every_key_and_is_valid(tmp_path, results):
     path = tmp_path / "out" / "result.json"
-    write_result_json(path, results["radar"])
+    write_json(path, results["radar"])
     data = json.loads(path.read_text())
-    assert set(RESULT_KEYS) <= set(data) and data["basin"] is None
+    assert tuple(data) == RESULT_KEYS  # exactly the documented keys, in order (no dense check here)
     assert data["evaluations"]["objective"] + data["evaluations"]["gradient"] <= 20
     assert set(data["wall_s"]) == {"compile", "run"}
     assert all(set(p) == {"r", "E_hard", "E_soft"} for p in data["sweep"])
@@ -70,23 +66,15 @@ def test_result_json_has_every_key_and_is_valid(tmp_path, results):
     _no_temp_files(path.parent)
 
 
-def test_result_json_refuses_incomplete_content_and_writes_nothing(tmp_path, results):
-    bad = dict(results["radar"])
-    del bad["sweep"]
-    with pytest.raises(ValueError, match="sweep"):
-        write_result_json(tmp_path / "result.json", bad)
-    assert list(tmp_path.iterdir()) == []
+def test_non_finite_numbers_become_null(solved):
+    content = _result(solved["radar"], "radar", E_soft_star=float("nan")).to_json()
+    assert content["E_soft_star"] is None
+    json.dumps(content, allow_nan=False)
 
 
-def test_non_finite_numbers_become_null(tmp_path, results):
-    content = dict(results["radar"], E_soft_star=float("nan"))
-    write_result_json(tmp_path / "result.json", content)
-    assert json.loads((tmp_path / "result.json").read_text())["E_soft_star"] is None
-
-
-def test_extra_keys_cannot_replace_schema_keys(solved):
-    with pytest.raises(ValueError, match="r_star"):
-        _record(solved["radar"], "radar", extra={"r_star": 1.0})
+def test_dense_check_is_recorded_when_made(solved):
+    content = _result(solved["radar"], "radar", dense_check={"step": 0.1}).to_json()
+    assert content["dense_check"] == {"step": 0.1} and tuple(content)[:-1] == RESULT_KEYS
 
 
 def test_figures_are_written_atomically(tmp_path, results):
@@ -97,7 +85,7 @@ def test_figures_are_written_atomically(tmp_path, results):
     de_dr = np.gradient(e_soft, r)
     res = results["radar"]
     plot_objective(
-        tmp_path / "objective.png", r, e_soft, e_hard, de_dr, res["sweep"], res["r_star"],
+        tmp_path / "objective.png", r, e_soft, e_hard, de_dr, res["sweep"], res["r_star"]["hfov"],
         param="hfov", scale=DEG, unit="deg",
     )
     rng = np.random.default_rng(0)

@@ -15,14 +15,13 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = """
 import json, jax
 jax.config.update("jax_enable_x64", True)
-from diffsense.metrics import make_objective
-from diffsense.tracks import prediction_frames
-from tests._toy_pipeline import TOY_GAIN, toy_detect, toy_predict, toy_scenes
-scenes, scenario = toy_scenes(n=3)  # 3 variants on 4 devices: exercises the zero-weight padding
-obj = make_objective(scenes, scenario, prediction_frames(scenes.num_frames), toy_detect(), toy_predict, TOY_GAIN)
-value, grad = obj.value_and_grad(42.0)
-print(json.dumps({"devices": jax.local_device_count(), "e2": float(value), "grad": float(grad),
-                  "hard": obj.e_hard(42.0), "sharded": len(obj.data.weight.sharding.device_set)}))
+from diffsense.solve import Evaluator
+from tests._toy_pipeline import toy_objective
+obj = toy_objective(n=3)  # 3 variants on 4 devices: exercises the zero-weight padding
+ev = Evaluator(obj)
+value, grad = ev.value_and_grad(42.0)
+print(json.dumps({"devices": jax.local_device_count(), "e2": float(value), "grad": float(grad[0]),
+                  "hard": ev.e_hard(42.0), "sharded": len(obj.data.weight.sharding.device_set)}))
 """
 
 
