@@ -1,6 +1,6 @@
 """The scene's output: ground-truth tracks every later stage consumes.
 
-Conventions (DESIGN.md): SI units; road frame s forward along the reference line, d to the left
+Conventions: SI units; road frame s forward along the reference line, d to the left
 (ISO 8855); world frame x, y in metres with heading counter-clockwise from +x. Scenes are at
 10 Hz. Vehicle index 0 is always the ego and index 1 the target (the vehicle whose trajectory is
 predicted); the other roles are in `role`.

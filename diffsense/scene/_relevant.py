@@ -1,6 +1,6 @@
 """The scene's relevant vehicles: what can reach the target's social grid, and what can hide it.
 
-A scene decides the size of the computation (DESIGN.md, "Model only what a scene requires"): a
+A scene decides the size of the computation (only what a scene requires is modelled): a
 vehicle is kept when, in some frame of a 3 s history window, it is in the target's 13 x 3 social
 grid (its lane within one of the target's and its longitudinal offset within 6.5 cells of 15 ft,
 the CS-LSTM grid), or when it can occlude such a vehicle (or the target) from the ego's sensors.

@@ -26,7 +26,7 @@ from diffsense.scene._road import Road, curvature_1pm, frenet_to_cartesian, lane
 from diffsense.scene._scenario_config import DriverModel, ScenarioConfig, VehicleModels, load_vehicle_models
 from diffsense.scene._variants import ScenarioNumbers, VehiclePlan, draw_plan, scenario_numbers
 
-SCENE_DT_S = 0.1  # 10 Hz (DESIGN.md)
+SCENE_DT_S = 0.1  # 10 Hz, the rate of the paper's recordings
 MIN_DESIRED_SPEED_MPS = 1.0  # a floor only: every shipped scenario starts at highway speed
 
 

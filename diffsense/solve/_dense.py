@@ -1,6 +1,6 @@
 """The brute-force baseline: the hard objective on a dense grid, and the basin cross-check.
 
-The issue's reference is a 0.5-deg grid over 30..180 deg HFOV (301 evaluations). The basin of
+The reference used for the main job is a 0.5-deg grid over 30..180 deg HFOV (301 evaluations). The basin of
 the best dense point is the run of grid points around it over which E_hard does not decrease
 moving away from it (plateaus included); the continuous answer should lie in it.
 """
