@@ -10,7 +10,6 @@ import pytest
 from diffsense.scene import TARGET_INDEX
 from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import (
-    GRID_CELLS,
     build_inputs,
     fill_window,
     grid_slots,
@@ -121,11 +120,12 @@ def test_grid_slots_follow_the_reference_layout():
     scene = _scene()
     frames = jnp.asarray([30])
     slot, inside = grid_slots(scene, frames)
-    centre = GRID_CELLS // 2
+    cells = 13  # the CS-LSTM grid: 13 cells of 15 ft = 4.572 m
+    centre = cells // 2
     # ego: right lane (2) and 20 m behind at t=3 s -> (20 + 3) m / 4.572 m ~ 5 cells back.
     ds = float(scene.s_m[30, 0] - scene.s_m[30, TARGET_INDEX])
-    assert int(slot[0, 0]) == 2 * GRID_CELLS + int(round(ds / 4.572)) + centre
-    assert int(slot[0, 2]) == 1 * GRID_CELLS + int(round(20.0 / 4.572)) + centre
+    assert int(slot[0, 0]) == 2 * cells + int(round(ds / 4.572)) + centre
+    assert int(slot[0, 2]) == 1 * cells + int(round(20.0 / 4.572)) + centre
     assert not bool(inside[0, TARGET_INDEX]) and not bool(inside[0, 3])
 
 
