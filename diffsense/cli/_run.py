@@ -1,30 +1,117 @@
 """What every command-line entry point shares: the exit-code contract and JAX start-up.
 
-Only CLI modules import this. `run(main)` calls `main()` and turns an `InputError` into one line
-on stderr and exit code 2 (never a traceback); Ctrl-C exits with 130.
+Only CLI modules import this. `run(main)` calls `main()` and keeps these promises:
+- an `InputError` becomes one line `error: <message>` on stderr, exit code 2 (never a traceback);
+  so does an `OSError` (a read-only folder, a path under a file, a full disk): `error: <path>:
+  <reason>`;
+- SIGINT (Ctrl-C), at any moment, prints the one line `interrupted` and exits 130; SIGTERM prints
+  `terminated` and exits 143 (128 + the signal number, as a shell reports a signal); neither leaves
+  a temporary file, staging folder or half-published output set behind (`diffsense._io`).
+
+Why not KeyboardInterrupt: a Ctrl-C that lands while JAX runs a host callback
+(`jax.pure_callback`) raises inside the callback, and XLA re-raises it as a `ValueError` with a
+long traceback. So `run` never lets the signal become an exception. Its Python-level handlers do
+nothing; Python's C-level handler also writes the signal number to a wake-up pipe
+(`signal.set_wakeup_fd`) the moment the signal arrives, whatever the main thread is doing, and a
+watcher thread reading that pipe removes the registered temporaries, prints the line and ends the
+process with `os._exit`. The watcher needs only the GIL, which the main thread releases while XLA
+compiles or computes and every few milliseconds while it runs Python.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from diffsense import _io
 from diffsense.errors import InputError
+
+_SIGNALS = {signal.SIGINT: ("interrupted", 130), signal.SIGTERM: ("terminated", 143)}
 
 
 def run(main: Callable[[], int | None]) -> None:
     """Run a CLI `main` under the project's error contract and exit with its code."""
     try:
-        code = main()
+        with _signals_end_the_process():
+            code = main()
     except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:
+        _fail(str(e))
+    except OSError as e:
+        where = " -> ".join(str(f) for f in (e.filename, e.filename2) if f is not None)
+        _fail(f"{where}: {e.strerror}" if where and e.strerror else str(e) or type(e).__name__)
+    except KeyboardInterrupt:  # only where the handlers could not be set (not the main thread)
         print("interrupted", file=sys.stderr)
         sys.exit(130)
     sys.exit(code or 0)
+
+
+def _fail(message: str) -> None:
+    print(f"error: {' '.join(message.split())}", file=sys.stderr)
+    sys.exit(2)
+
+
+def _ignore(_signum: int, _frame: object) -> None:
+    """The Python-level handler: the watcher thread does the work (see the module docstring)."""
+
+
+@contextlib.contextmanager
+def _signals_end_the_process() -> Iterator[None]:
+    """For the block: SIGINT and SIGTERM end the process cleanly from a watcher thread.
+
+    Restores the previous handlers and wake-up fd afterwards, so `run` can be called in-process
+    (tests). Outside the main thread, where handlers cannot be set, the block runs as is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)  # set_wakeup_fd requires it
+    watcher = threading.Thread(target=_watch, args=(read_fd,), name="diffsense-signals", daemon=True)
+    watcher.start()
+    previous_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    previous = {s: signal.signal(s, _ignore) for s in _SIGNALS}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        signal.set_wakeup_fd(previous_fd)
+        os.close(write_fd)  # the watcher reads end-of-file and returns
+        watcher.join(timeout=5)
+
+
+def _watch(read_fd: int) -> None:
+    """Wait for a signal number on the wake-up pipe; end the process on SIGINT or SIGTERM."""
+    try:
+        while data := os.read(read_fd, 64):
+            for signum in data:
+                if signum in _SIGNALS:
+                    _end(signum)
+    finally:
+        os.close(read_fd)
+
+
+def _end(signum: int) -> None:
+    line, code = _SIGNALS[signum]
+    _io.abandon_temporaries()  # keeps the lock: nothing new is created or published after it
+    # Flush what the program already printed, from a helper thread: a flush blocked on a full
+    # pipe must not stop the exit.
+    flusher = threading.Thread(target=_flush_quietly, daemon=True)
+    flusher.start()
+    flusher.join(timeout=0.5)
+    os.write(2, f"{line}\n".encode())
+    os._exit(code)
+
+
+def _flush_quietly() -> None:
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
 
 
 def setup_jax(float64: bool = True, compilation_cache: bool = True) -> None:
