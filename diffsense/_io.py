@@ -124,8 +124,8 @@ def check_writable(out_dir: str | os.PathLike[str]) -> None:
         while not base.exists() and not base.is_symlink() and base.parent != base:
             base = base.parent
         if not base.is_dir():
-            where = "exists and is not a folder" if base == out else f"lies under {base}, which is not a folder"
-            raise InputError(f"output folder {out} {where}")
+            where = "exists" if base == out else f"lies under {base}, which exists"
+            raise InputError(f"output folder {out} {where} and is not a folder")
         fd, probe = tempfile.mkstemp(dir=base, prefix=".diffsense-probe-")
         os.close(fd)
         os.unlink(probe)

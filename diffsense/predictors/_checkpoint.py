@@ -83,7 +83,8 @@ def _check_directory(fp: BinaryIO) -> None:
     tail_len = min(size, 22 + 0xFFFF)
     fp.seek(size - tail_len)
     tail = fp.read(tail_len)
-    at = tail_len - 22 if tail[-22:-18] == b"PK\x05\x06" and tail[-2:] == b"\0\0" else tail.rfind(b"PK\x05\x06")
+    plain = tail[-22:-18] == b"PK\x05\x06" and tail[-2:] == b"\0\0"  # no archive comment
+    at = tail_len - 22 if plain else tail.rfind(b"PK\x05\x06")
     if at < 0 or tail_len - at < 22:
         return
     members, directory = struct.unpack("<10xHL6x", tail[at : at + 22])
@@ -178,7 +179,8 @@ class _Unpickler(pickle.Unpickler):
         key, numel = pid[2], pid[4]
         if key not in self._storages:
             if numel * _ITEM > MAX_STORAGE_BYTES:
-                raise _Refused(f"storage {key} declares {numel} elements, over the limit of {MAX_STORAGE_BYTES // _ITEM}")
+                limit = MAX_STORAGE_BYTES // _ITEM
+                raise _Refused(f"storage {key} declares {numel} elements, over the limit of {limit}")
             member = f"{self._root}/data/{key}"
             raw = _read_member(self._archive, member, MAX_STORAGE_BYTES, _ITEM * numel, f"storage {key}: ")
             self._bytes_in += len(raw)
