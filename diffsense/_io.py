@@ -158,7 +158,8 @@ def output_set(out_dir: str | os.PathLike[str]) -> Iterator[Path]:
     - `out/manifest.json` lists the previous set's files (relative paths); those files, and
       sub-folders they leave empty, are removed: nothing else in `out` is ever touched, so files
       the user keeps there survive, and a folder holds exactly one run's set;
-    - the new files are moved in (`os.replace`), `manifest.json` last, listing them;
+    - the new files are moved in (`os.replace`), `manifest.json` last, listing them (a folder
+      without a manifest, a first run's, loses only the files the new set overwrites);
     - a new file that would replace a folder is refused (InputError) before anything changes.
     When the block raises, or the process is interrupted (see `diffsense.cli._run`), the staging
     folder, and `out` itself if this call created it and it is empty, are removed; the previous
