@@ -49,20 +49,24 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
+from diffsense.predictors._protocol import CSLSTM_SPEC
+from diffsense.scene._simulate import SCENE_DT_S
 from diffsense.scene._traffic_state import TrafficTrajectories
 
+# The sample layout is the CS-LSTM's input spec (one source: diffsense.predictors.CSLSTM_SPEC).
 LAYOUT_VERSION = 1
-DOWNSAMPLE = 2  # 10 Hz -> 5 Hz
-HIST_LEN = 16  # 3 s at 5 Hz, the last point at the prediction instant
-FUT_LEN = 25  # 5 s at 5 Hz
-GRID_CELL_M = 15 * 0.3048  # 15 ft
-GRID_CELLS = 13
-GRID_LANES = 3
-GRID_SLOTS = GRID_LANES * GRID_CELLS
-GRID_REACH_M = 6 * GRID_CELL_M  # 90 ft: neighbours strictly closer than this along the road
-LAT_WINDOW = 20  # 4 s at 5 Hz either side (lateral label)
-LON_HIST = 15  # 3 s at 5 Hz back (longitudinal label's current speed)
-LON_FUT = 25  # 5 s at 5 Hz ahead
+DOWNSAMPLE = CSLSTM_SPEC.frames_per_point(SCENE_DT_S)  # 10 Hz -> 5 Hz
+HIST_LEN = CSLSTM_SPEC.history_points  # 3 s at 5 Hz, the last point at the prediction instant
+FUT_LEN = CSLSTM_SPEC.future_points  # 5 s at 5 Hz
+GRID_CELL_M = CSLSTM_SPEC.grid_cell_m  # 15 ft
+GRID_CELLS = CSLSTM_SPEC.grid_cells
+GRID_LANES = CSLSTM_SPEC.grid_lanes
+GRID_SLOTS = CSLSTM_SPEC.grid_size
+GRID_REACH_M = (GRID_CELLS // 2) * GRID_CELL_M  # 90 ft: neighbours strictly closer than this along the road
+_PER_S = int(CSLSTM_SPEC.rate_hz)
+LAT_WINDOW = 4 * _PER_S  # 4 s either side (lateral label, the reference's rule)
+LON_HIST = HIST_LEN - 1  # 3 s back (longitudinal label's current speed)
+LON_FUT = FUT_LEN  # 5 s ahead
 BRAKING_RATIO = 0.8
 KEEP, LEFT, RIGHT = 0, 1, 2
 NORMAL, BRAKING = 0, 1
@@ -105,8 +109,8 @@ def lateral_label(lane_before: Int[Array, "*S"], lane_now: Int[Array, "*S"], lan
 def longitudinal_label(s_3s_before_m: Float[Array, "*S"], s_now_m: Float[Array, "*S"], s_5s_after_m: Float[Array, "*S"]) -> Int[Array, "*S"]:
     """Reference longitudinal manoeuvre: braking when the mean speed over the next 5 s is below
     0.8 x the mean speed over the last 3 s (positions along the road [m])."""
-    speed_hist = (s_now_m - s_3s_before_m) / (LON_HIST / 5.0)
-    speed_fut = (s_5s_after_m - s_now_m) / (LON_FUT / 5.0)
+    speed_hist = (s_now_m - s_3s_before_m) / (LON_HIST / CSLSTM_SPEC.rate_hz)
+    speed_fut = (s_5s_after_m - s_now_m) / (LON_FUT / CSLSTM_SPEC.rate_hz)
     return jnp.where(speed_fut < BRAKING_RATIO * speed_hist, BRAKING, NORMAL).astype(jnp.int32)
 
 
@@ -127,7 +131,7 @@ def extract_samples(
     d = traj.d_m[::DOWNSAMPLE]
     lane = traj.centre_lane(lane_width_m)[::DOWNSAMPLE]
     ring = traj.vehicles.ring_length_m
-    stride = int(round(instant_every_s * 5.0))
+    stride = int(round(instant_every_s * CSLSTM_SPEC.rate_hz))
     count = num_instants(window_s, instant_every_s)
     if FIRST_INSTANT + (count - 1) * stride + FUT_LEN > s.shape[0] - 1:
         raise ValueError(f"recording of {s.shape[0]} frames at 5 Hz is too short for a {window_s} s window")
@@ -151,9 +155,9 @@ def _at_instant(s, d, lane, ring, k) -> DenseSamples:
     dlon = jnp.mod(raw + 0.5 * ring, ring) - 0.5 * ring
     dlane = lane_now[None, :] - lane_now[:, None]
     valid = (jnp.abs(dlane) <= 1) & (jnp.abs(dlon) < GRID_REACH_M) & ~jnp.eye(num_v, dtype=bool)
-    cell = jnp.clip(jnp.round(dlon / GRID_CELL_M).astype(jnp.int32) + 6, 0, GRID_CELLS - 1)
+    cell = jnp.clip(jnp.round(dlon / GRID_CELL_M).astype(jnp.int32) + GRID_CELLS // 2, 0, GRID_CELLS - 1)
     slot = jnp.where(valid, (1 - dlane) * GRID_CELLS + cell, GRID_SLOTS)  # GRID_SLOTS: a spill column
-    off_centre_mm = jnp.round(jnp.abs(dlon - (cell - 6) * GRID_CELL_M) * 1000.0).astype(jnp.int32)
+    off_centre_mm = jnp.round(jnp.abs(dlon - (cell - GRID_CELLS // 2) * GRID_CELL_M) * 1000.0).astype(jnp.int32)
     key = jnp.where(valid, off_centre_mm * _KEY_BASE + jnp.arange(num_v, dtype=jnp.int32)[None, :], _EMPTY)
     rows = jnp.broadcast_to(jnp.arange(num_v)[:, None], slot.shape)
     best = jnp.full((num_v, GRID_SLOTS + 1), _EMPTY, jnp.int32).at[rows, slot].min(key)[:, :GRID_SLOTS]
