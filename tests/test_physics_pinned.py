@@ -207,3 +207,32 @@ def test_noise_draws_are_standard_normal_and_independent():
     for d in draws[..., 1]:
         _assert_gaussian(d, 1.0)
     assert abs(np.corrcoef(draws[0, :, 1], draws[1, :, 1])[0, 1]) <= 3 / math.sqrt(DRAWS)
+
+
+def test_camera_fov_edge_is_half_the_hfov():
+    # Cars 30 m from the camera at azimuth 29 / 31 deg (HFOV 60) and 59 / 61 deg (HFOV 120).
+    az = np.radians([29.0, 31.0, 59.0, 61.0])
+    x = np.stack([np.zeros(4), CAMERA.mount_x_m + 30.0 * np.cos(az)], axis=1)
+    y = np.stack([np.zeros(4), 30.0 * np.sin(az)], axis=1)
+    scene = make_scene(x, y)
+    seen = {h: np.asarray(jit_p_detect(scene, sensor.make_params(CAMERA, hfov_deg=h), CAMERA,
+                                       mode="hard"))[:, 1] for h in (60.0, 120.0)}
+    np.testing.assert_array_equal(seen[60.0], [1, 0, 0, 0])
+    np.testing.assert_array_equal(seen[120.0], [1, 1, 1, 0])
+
+
+@pytest.mark.parametrize("name", ["radar", "camera"])
+def test_sensor_functions_default_to_soft_at_the_documented_temperature(name):
+    # A car at the camera's resolvability edge at 180 deg / the radar's 100 m range edge at 30 deg
+    # (soft p ~ 1/2 in both).
+    config = RADAR if name == "radar" else CAMERA
+    params = sensor.make_params(config, hfov_deg=180.0 if name == "camera" else 30.0)
+    scene = _ahead(config, [73.335 if name == "camera" else 100.0])
+    p_fn = sensor.camera_p_detect if name == "camera" else sensor.radar_p_detect
+    det_fn = sensor.camera_detect if name == "camera" else sensor.radar_detect
+    explicit = float(p_fn(scene, params, config, mode="soft", temperature=1.0)[0, 1])
+    assert 0.2 < explicit < 0.8
+    assert float(p_fn(scene, params, config)[0, 1]) == explicit
+    assert float(det_fn(scene, params, config, KEY).p_detect[0, 1]) == explicit
+    assert float(sensor.p_detect(scene, params, config)[0, 1]) == explicit
+    assert float(sensor.detect(scene, params, config, KEY).p_detect[0, 1]) == explicit
