@@ -1,0 +1,129 @@
+"""Mutation testing of one package with mutmut, by hand (too slow for CI): docs/mutation.md.
+
+    python tools/mutation.py sensors                  # every file of diffsense/sensors/
+    python tools/mutation.py sensors --files _camera.py _radar.py
+    python tools/mutation.py solve --rev HEAD~1 --max-children 2
+
+The commit `--rev` (default HEAD: commit first) is exported with `git archive` into a scratch
+directory, so edits in the working tree during the run change nothing. There the `[mutmut]`
+section of setup.cfg is completed from the package's `[mutmut:PACKAGE]` section (the files to
+mutate and a fast, relevant test subset) and `mutmut run` mutates the package, running for each
+mutant only the selected tests that reach the mutated function. The summary (counts per file and
+every surviving mutant's diff) is printed and written to `<workdir>/report.md`; review each
+survivor there: kill it with a test or list it in docs/mutation.md as equivalent, with why.
+
+mutmut's fork server starts every mutant's pytest from a fresh import (`forkserver_warmup =
+none`): a process that had already run the tests would carry jax's compiled functions, traced
+without the mutation, into every mutant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import configparser
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("sensors", "tracks", "metrics", "solve")
+
+
+def _export(rev: str, workdir: Path) -> str:
+    """Unpack commit `rev` of the repository into `workdir`; returns its full hash."""
+    commit = subprocess.run(["git", "rev-parse", rev], cwd=ROOT, check=True, capture_output=True,
+                            text=True).stdout.strip()
+    workdir.mkdir(parents=True)
+    archive = subprocess.run(["git", "archive", commit], cwd=ROOT, check=True, capture_output=True)
+    subprocess.run(["tar", "-x", "-C", str(workdir)], input=archive.stdout, check=True)
+    return commit
+
+
+def _configure(workdir: Path, package: str, files: list[str]) -> list[str]:
+    """Write the scratch setup.cfg's [mutmut] section for `package`; returns the test files."""
+    parser = configparser.ConfigParser()
+    parser.read(workdir / "setup.cfg")
+    section = parser[f"mutmut:{package}"]
+    patterns = [f"diffsense/{package}/{f}" for f in files] if files else [f"diffsense/{package}/*"]
+    tests = section["tests"].split()
+    parser["mutmut"]["only_mutate"] = "\n" + "\n".join(patterns)
+    parser["mutmut"]["pytest_add_cli_args_test_selection"] = "\n" + "\n".join(tests)
+    for name in list(parser.sections()):
+        if name.startswith("mutmut:"):
+            parser.remove_section(name)
+    with open(workdir / "setup.cfg", "w") as f:
+        parser.write(f)
+    return tests
+
+
+def _results(workdir: Path) -> dict[str, str]:
+    """mutant name -> status (killed, survived, no tests, timeout, ...) of the last run."""
+    out = subprocess.run(["mutmut", "results", "--all", "true"], cwd=workdir, check=True,
+                         capture_output=True, text=True).stdout
+    pairs = (line.strip().rsplit(": ", 1) for line in out.splitlines() if ": " in line)
+    return {name: status for name, status in pairs}
+
+
+def _diff(workdir: Path, name: str) -> str:
+    out = subprocess.run(["mutmut", "show", name], cwd=workdir, capture_output=True, text=True).stdout
+    lines = [ln for ln in out.splitlines() if ln[:1] in "+-" and ln[:3] not in ("+++", "---")]
+    return "\n".join(lines)
+
+
+def _report(workdir: Path, package: str, commit: str, tests: list[str], command: str,
+            wall_s: float) -> str:
+    results = _results(workdir)
+    by_file: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+    for name, status in results.items():
+        module = name.split(".x_")[0].split(".xǁ")[0]
+        by_file[module][status] += 1
+    total = collections.Counter(results.values())
+    lines = [f"# Mutation run: diffsense/{package} at {commit[:12]}", "",
+             f"Command: `{command}` ({wall_s / 60:.1f} min)", "",
+             f"Tests: {' '.join(tests)}", "",
+             "| module | mutants | killed | survived | other |", "|---|---|---|---|---|"]
+    for module, counts in sorted(by_file.items()):
+        other = sum(counts.values()) - counts["killed"] - counts["survived"]
+        lines.append(f"| {module} | {sum(counts.values())} | {counts['killed']} | "
+                     f"{counts['survived']} | {other} |")
+    lines += ["", f"Total: {sum(total.values())} mutants, " +
+              ", ".join(f"{n} {s}" for s, n in sorted(total.items())), "", "## Survivors", ""]
+    for name, status in sorted(results.items()):
+        if status != "killed":
+            lines += [f"### {name} ({status})", "```diff", _diff(workdir, name), "```", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("package", choices=PACKAGES)
+    parser.add_argument("--files", nargs="*", default=[], help="file names inside the package")
+    parser.add_argument("--rev", default="HEAD", help="commit to test (default HEAD)")
+    parser.add_argument("--workdir", type=Path, help="scratch directory (default: a new temp dir)")
+    parser.add_argument("--max-children", type=int, default=1, help="parallel mutants (default 1)")
+    args = parser.parse_args(argv)
+    if shutil.which("mutmut") is None:
+        print("error: mutmut is not installed (pip install -e '.[mutation]')", file=sys.stderr)
+        return 2
+    workdir = args.workdir or Path(tempfile.mkdtemp(prefix=f"mutation-{args.package}-")) / "tree"
+    commit = _export(args.rev, workdir)
+    tests = _configure(workdir, args.package, args.files)
+    command = "python tools/mutation.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    print(f"mutating diffsense/{args.package} of {commit[:12]} in {workdir}", flush=True)
+    start = time.perf_counter()
+    run = subprocess.run(["mutmut", "run", "--max-children", str(args.max_children)], cwd=workdir)
+    wall_s = time.perf_counter() - start
+    report = _report(workdir, args.package, commit, tests, command, wall_s)
+    (workdir / "report.md").write_text(report)
+    print(report)
+    print(json.dumps({"report": str(workdir / "report.md"), "mutmut_exit": run.returncode}))
+    return run.returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
