@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense import config as cfgio
+from diffsense._breakdown import breakdown, tracked_summary
 from diffsense._problem import Problem
 from diffsense._result import Curves, Result
 from diffsense._timing import CompileClock
@@ -60,7 +61,8 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
         dtype=dtype)
     frames = prediction_frames(scenes.num_frames, problem.prediction_stride_frames, predictor.spec, scenes.dt_s)
     return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
-                          fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names)
+                          fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names,
+                          question=problem.objective, miss_penalty_m2=problem.miss_penalty_m2)
 
 
 def _config(problem: Problem) -> dict[str, Any]:
@@ -95,6 +97,17 @@ def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: in
     return Curves(r=tuple(r_curve), E_soft=tuple(soft), E_hard=tuple(hard), dE_dr=tuple(grad),
                   horizon_gt=gt, horizon_sensor=sensor, horizon_s=E.spec.horizon_s(), timeline=timeline,
                   timeline_roles=tuple(ROLE_NAMES[int(first.role[v])] for v in cols), dt_s=float(first.dt_s))
+
+
+def _breakdowns(ev: Evaluator, E: Objective, result, miss_penalty_m2: float) -> dict[str, Any]:
+    """The breakdown at r* and at every sweep step, and the tracked question's pieces at r*."""
+    scenario, weight = np.asarray(E.data.scenario), np.asarray(E.data.weight)
+
+    def at(r):
+        return breakdown(ev.hard(r), scenario, weight, E.scenario_names, E.spec.horizon_s())
+
+    return {"breakdown": at(result.r_star), "sweep_breakdown": tuple(at(p.r) for p in result.sweep),
+            "tracked": tracked_summary(ev.hard(result.r_star), weight, miss_penalty_m2)}
 
 
 def _dense_check(ev: Evaluator, result, lo: float, hi: float, step: float) -> dict[str, Any]:
@@ -145,6 +158,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         solve_counts = dict(ev.counts)
         say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, E_hard(r*) = {result.E_hard_star:.4f} m")
         curves = _curves(ev, E, result, lo, hi, problem.extra_curve_points, hard_only) if figures else None
+        parts = _breakdowns(ev, E, result, problem.miss_penalty_m2)
     figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
     dense = None
     if problem.dense_check is not None:
@@ -157,4 +171,4 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         E_soft_star=float(result.E_soft_star), solve=result,
         programs_run={"solve": solve_counts, "figures": figure_counts},
         wall_s={"compile": clock.compile_s, "run": clock.run_s}, scenarios=tuple(E.scenario_names),
-        config=_config(problem), curves=curves, dense_check=dense)
+        config=_config(problem), curves=curves, dense_check=dense, **parts)

@@ -16,7 +16,7 @@ from typing import Any
 
 from diffsense import config as cfgio
 from diffsense.errors import InputError
-from diffsense.metrics import PAPER_SCENARIOS, EstimatorConfig
+from diffsense.metrics import PAPER_SCENARIOS, QUESTIONS, EstimatorConfig
 from diffsense.predictors import Predictor
 from diffsense.sensors import Sensor, make_sensor
 from diffsense.sensors._params import ParamSpec
@@ -45,6 +45,9 @@ class Problem:
         prediction_stride_frames: one prediction instant every this many scene frames [-].
         background_vehicles: if > 0, replaces every scenario's count of far background vehicles.
         float64: compute E(r) in float64 (enables JAX's x64 mode when needed).
+        objective: the question E answers: "eq12" (the paper's, every instant) or "tracked"
+            (the error where the target has a track, plus `miss_penalty_m2` per missed share).
+        miss_penalty_m2: the price of an instant without a track under "tracked" [m^2].
         steps: the stepped sweep's points (one-parameter problems; None: the default steps).
         solve: settings of the continuous solve.
         dense_check: if set, `optimise` also evaluates E_hard every this many parameter units.
@@ -62,6 +65,8 @@ class Problem:
     prediction_stride_frames: int = 4
     background_vehicles: int = 0
     float64: bool = True
+    objective: str = "eq12"
+    miss_penalty_m2: float = 100.0
     steps: Sequence[float] | None = None
     solve: SolveConfig = SolveConfig()
     dense_check: float | None = None
@@ -85,6 +90,11 @@ class Problem:
         _check_int("prediction_stride_frames", self.prediction_stride_frames, 1, 1000)
         _check_int("background_vehicles", self.background_vehicles, 0, 10_000)
         _check_int("extra_curve_points", self.extra_curve_points, 0, 1000)
+        if self.objective not in QUESTIONS:
+            raise InputError(f"unknown objective {self.objective!r} (known: {', '.join(QUESTIONS)})")
+        set_("miss_penalty_m2", _finite(self.miss_penalty_m2, "miss_penalty_m2"))
+        if self.miss_penalty_m2 < 0:
+            raise InputError(f"miss_penalty_m2 must be >= 0, got {self.miss_penalty_m2:g}")
         if self.fill not in FILL_POLICIES:
             raise InputError(f"unknown fill {self.fill!r} (known: {', '.join(FILL_POLICIES)})")
         if self.steps is not None:
@@ -185,6 +195,8 @@ class ProblemSection:
     prediction_stride_frames: int = 4
     background_vehicles: int = 0
     float64: bool = True
+    objective: str = "eq12"
+    miss_penalty_m2: float = 100.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -241,4 +253,4 @@ def problem_fields(settings: Settings, sensor: str | None = None, param: str | N
     return dict(sensor=sensor, params={name: tuple(interval)}, scenarios=p.scenarios, variants=p.variants,
                 seed=p.seed, predictor=p.model, fill=p.fill, estimator=p.estimator,
                 prediction_stride_frames=p.prediction_stride_frames, background_vehicles=p.background_vehicles,
-                float64=p.float64, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)
+                float64=p.float64, objective=p.objective, miss_penalty_m2=p.miss_penalty_m2, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)

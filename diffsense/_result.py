@@ -19,6 +19,18 @@ result.json schema (every key always present; non-finite numbers are written as 
     "bracket"       [lo, hi] where the continuous solve searched
     "tau_schedule"  [number, ...]  temperature multipliers of the continuation, largest first
     "notes"         [string, ...]  why the answer is what it is, when that needs saying
+    "objective"     string   the question E answers: "eq12" (every instant) or "tracked"
+    "by_scenario"   {scenario: {"E_hard": m, "coverage": {...}}}   at r* (Eq. 12, hard)
+    "by_horizon"    {"t_s": [...], "E_hard": [...], "rmse_true_gt": [...], "rmse_true_sensor": [...]}
+                             at r*, per horizon step: Eq. 12, and both predictions against the
+                             true future (ground-truth input, sensor input) [m]
+    "coverage"      {"at_instant": f, "in_window": f, "throughout": f, "parts": {"throughout" |
+                             "partly" | "never": {"share": f, "E_hard": m}}}   pooled, at r*:
+                             shares of instants whose target is detected at the instant, at least
+                             once in the history window, throughout it; E on each part
+    "tracked"       {"E_tracked": m, "missed_share": f, "J_m2": m^2, "miss_penalty_m2": m^2}
+                             at r*: the "tracked" question's pieces (whichever was optimised)
+    "sweep" entries also hold "by_scenario" and "coverage" at their step.
     "scenarios"     [string, ...]
     "config"        object   the problem as plain JSON
     "versions"      {"python", "jax", ..., "diffsense": string}
@@ -42,7 +54,7 @@ from diffsense.solve import SolveResult
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
-               "scenarios", "config", "versions")
+               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "scenarios", "config", "versions")
 
 
 def versions() -> dict[str, str]:
@@ -122,6 +134,9 @@ class Result:
     config: dict[str, Any]
     curves: Curves | None = None
     dense_check: dict[str, Any] | None = None
+    breakdown: dict[str, Any] | None = None
+    sweep_breakdown: tuple[dict[str, Any], ...] = ()
+    tracked: dict[str, Any] | None = None
 
     @property
     def sweep(self):
@@ -157,7 +172,9 @@ class Result:
             "r_star": dict(self.r_star),
             "E_soft_star": self.E_soft_star,
             "E_hard_star": self.E_hard_star,
-            "sweep": [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft} for p in s.sweep],
+            "sweep": [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft}
+                      | ({k: b[k] for k in ("by_scenario", "coverage")} if b else {})
+                      for p, b in zip(s.sweep, self.sweep_breakdown or [None] * len(s.sweep))],
             "evaluations": {k: s.evaluations[k] for k in ("objective", "gradient")},
             "programs_run": self.programs_run,
             "wall_s": dict(self.wall_s),
@@ -165,6 +182,11 @@ class Result:
             "bracket": list(s.bracket),
             "tau_schedule": list(s.tau_schedule),
             "notes": list(s.notes),
+            "objective": self.config.get("objective", "eq12"),
+            "by_scenario": (self.breakdown or {}).get("by_scenario"),
+            "by_horizon": (self.breakdown or {}).get("by_horizon"),
+            "coverage": (self.breakdown or {}).get("coverage"),
+            "tracked": self.tracked,
             "scenarios": list(self.scenarios),
             "config": self.config,
             "versions": versions(),

@@ -118,8 +118,8 @@ def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
     assert dense["in_basin"] == dense["verdict"].startswith("r* lies in the basin")
     for name in ("objective.png", "rmse_horizon.png", "detections.png"):
         assert (out / name).stat().st_size > 1000
-    assert sorted(p.name for p in out.iterdir()) == ["detections.png", "objective.png", "result.json",
-                                                     "rmse_horizon.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["detections.png", "manifest.json", "objective.png",
+                                                     "result.json", "rmse_horizon.png"]
 
 
 def test_config_file_values_reach_the_run_and_flags_override_them(tmp_path):

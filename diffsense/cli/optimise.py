@@ -45,6 +45,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fill", choices=("zero", "hold", "interp"), help="missing-detection policy")
     p.add_argument("--estimator", choices=("mean-field", "mc", "hard"), help="how detection uncertainty enters")
     p.add_argument("--mc-samples", type=int, help="Monte-Carlo samples K (--estimator mc)")
+    p.add_argument("--objective", choices=("eq12", "tracked"),
+                   help="eq12: the paper's E over every instant; tracked: the error where the target has a "
+                   "track plus --miss-penalty per missed share")
+    p.add_argument("--miss-penalty", type=float, metavar="M2",
+                   help="tracked: price of an instant without a track [m^2] (default 100: a 10 m RMS error)")
     p.add_argument("--tau", type=float, help="temperature multiplier of the final continuation level")
     p.add_argument("--seed", type=int, help="seed of scenes, noise and Monte-Carlo draws")
     p.add_argument("--dense-check", type=float, metavar="STEP",
@@ -80,7 +85,8 @@ def problems(args: argparse.Namespace) -> list:
         fields = problem_fields(settings, sensor, args.param, tuple(args.interval) if args.interval else None)
         if args.scenarios is not None:
             fields["scenarios"] = args.scenarios
-        for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed")):
+        for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed"),
+                          ("objective", "objective"), ("miss_penalty", "miss_penalty_m2")):
             if getattr(args, flag) is not None:
                 fields[key] = getattr(args, flag)
         estimator = to_dict(settings.problem.estimator)
@@ -124,6 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} exists and is not a folder")
+    from diffsense._io import check_writable, output_set
+
+    check_writable(out)  # before any computation
 
     _cli.setup_jax(float64=todo[0].float64)
     import diffsense as ds
@@ -141,18 +150,22 @@ def main(argv: list[str] | None = None) -> int:
     predictor = load_predictor(model or None)  # a bad checkpoint fails before any output
     progress("loaded the predictor" + (f" {model}" if model else " (shipped weights)"))
     results = {}
-    for problem in todo:
-        folder = out / problem.sensor_kind if len(todo) > 1 else out
-        result = ds.optimise(problem, predictor=predictor, progress=progress)
-        results[problem.sensor_kind] = report.write_run(result, folder)
-        progress(f"{problem.sensor_kind}: wrote {folder}/" + ", ".join(report.RUN_FILES))
+    # Every file of the run is written to a staging folder and published into --out as one set:
+    # an interrupted or failed run leaves the previous run's files as they were.
+    with output_set(out) as staging:
+        for problem in todo:
+            folder = staging / problem.sensor_kind if len(todo) > 1 else staging
+            result = ds.optimise(problem, predictor=predictor, progress=progress)
+            results[problem.sensor_kind] = report.write_run(result, folder)
+        if len(results) > 1:
+            first = next(iter(results.values()))
+            table = report.comparison_table(results, unit=first["units"][first["param"]])
+            write_bytes(staging / "comparison.txt", (table + "\n").encode())
+    progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if len(results) > 1 else ""))
     for content in results.values():
         print("\n" + report.summary_table(content, unit=content["units"][content["param"]]))
     if len(results) > 1:
-        first = next(iter(results.values()))
-        table = report.comparison_table(results, unit=first["units"][first["param"]])
         print("\nradar versus camera\n" + table)
-        write_bytes(out / "comparison.txt", (table + "\n").encode())
     return 0
 
 

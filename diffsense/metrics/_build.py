@@ -18,7 +18,7 @@ import numpy as np
 from diffsense.config import replace
 from diffsense.errors import InputError
 from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms
-from diffsense.metrics._objective import Objective, ObjectiveData
+from diffsense.metrics._objective import QUESTIONS, Objective, ObjectiveData
 from diffsense.metrics._sharding import shard_leading_axis
 from diffsense.predictors import InputSpec
 from diffsense.scene import Scene, load_scenario, relevant_vehicles, simulate_scenario
@@ -92,16 +92,24 @@ def make_objective(
     key: jax.Array | None = None,
     scenario_names: Sequence[str] | None = None,
     shard: bool = True,
+    question: str = "eq12",
+    miss_penalty_m2: float = 100.0,
 ) -> Objective:
     """E(r) of `sensor` and `predictor` over the scene variants `scenes` [N, T, V].
 
     `key` fixes every random draw (measurement noise, Monte-Carlo uniforms): same key, same E(r).
+    `question` is "eq12" or "tracked", `miss_penalty_m2` the price of an instant without a track
+    in the latter (see `Objective`).
     Ground-truth predictions are computed here, once. With several JAX devices the variants
     are sharded over them (padded with zero-weight copies to a multiple of the device count);
     with one device nothing changes.
     """
     for name in names:
         sensor.spec(name)
+    if question not in QUESTIONS:
+        raise InputError(f"unknown objective {question!r} (known: {', '.join(QUESTIONS)})")
+    if not (np.isfinite(miss_penalty_m2) and miss_penalty_m2 >= 0):
+        raise InputError(f"miss_penalty_m2 must be a finite number >= 0, got {miss_penalty_m2}")
     frames = np.asarray(frames, dtype=np.int32)
     scenario = jnp.asarray(scenario, jnp.int32)
     n = scenario.shape[0]
@@ -127,4 +135,4 @@ def make_objective(
         scenario_names = tuple(f"scenario{i}" for i in range(int(jnp.max(scenario)) + 1))
     return Objective(data=data, sensor=sensor, predictor=predictor, names=tuple(names),
                      frames=tuple(int(f) for f in frames), fill=fill, estimator=estimator,
-                     scenario_names=tuple(scenario_names))
+                     scenario_names=tuple(scenario_names), question=question, miss_penalty_m2=float(miss_penalty_m2))

@@ -10,6 +10,22 @@ ground-truth predictions y_GT do not depend on r and are computed once, when it 
 instant is ever dropped: a missed target enters through the fill policy, so a blind sensor is
 penalised. Solvers work on E^2 (`e2`); `E(r)` is its square root with a gradient that stays
 finite at E = 0.
+
+Two questions can be asked (`question`):
+- "eq12" (the default, the paper's): E over every instant. An instant whose target the sensor
+  never saw in the history window predicts from a fill (a parked car under `zero`), so E also
+  measures coverage.
+- "tracked": the prediction error over the instants whose target has a track, each instant
+  weighted by the probability q that the target was detected at least once in its history
+  window, plus a price for the instants without one:
+      J = sum_i q_i e_i^2 / (1 + sum_i q_i)  +  miss_penalty_m2 * (1 - mean_i q_i)      [m^2]
+  The first term alone would let a blind sensor "win" (no tracked instant, no error); the
+  penalty says what a missed track costs, in the units of a squared prediction error (the
+  default 100 m^2: as bad as a 10 m RMS error). The 1 in the denominator is one pseudo-instant
+  of zero error: without it, instants tracked with a tiny probability (a nearly blind soft
+  sensor) would stand for all of them, and J would not tend to the hard J (the price alone)
+  as the sensor goes blind; with hundreds of tracked instants it moves J by well under 1 %.
+  Both terms are smooth in r and finite when no instant is tracked.
 """
 
 from __future__ import annotations
@@ -23,6 +39,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
+from diffsense.metrics._coverage import coverage_classes, p_tracked, target_window
 from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli
 from diffsense.predictors import InputSpec
 from diffsense.scene import Scene
@@ -31,6 +48,8 @@ from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import FillPolicy, PredictorInputs, build_inputs, flatten_instants
 
 Mode = Literal["soft", "hard"]
+Question = Literal["eq12", "tracked"]
+QUESTIONS: tuple[str, ...] = ("eq12", "tracked")
 Params = Mapping[str, Any]
 
 
@@ -70,12 +89,23 @@ class HardEvaluation:
         rmse_gt: [S, F] RMSE of the ground-truth-input prediction against the true future, per
             scenario and horizon step [m].
         rmse_sensor: [S, F] the same for the sensor-input prediction [m].
+        sq_instant: [N, I] the squared distance per instant, mean over horizon steps [m^2].
+        coverage: [N, I, 3] 0/1: target detected at the instant, at least once in the history
+            window, throughout it (see `_coverage.py`).
+        sq_true_gt: [N, I, F] squared error of the ground-truth-input prediction against the
+            true future [m^2]; sq_true_sensor the same for the sensor-input prediction.
+        objective: [] the question's value (`e2` for "eq12"; J for "tracked") [m^2].
     """
 
     e2: Float[Array, ""]
     sq_error: Float[Array, "N F"]
     rmse_gt: Float[Array, "S F"]
     rmse_sensor: Float[Array, "S F"]
+    sq_instant: Float[Array, "N I"]
+    coverage: Float[Array, "N I 3"]
+    sq_true_gt: Float[Array, "N I F"]
+    sq_true_sensor: Float[Array, "N I F"]
+    objective: Float[Array, ""]
 
 
 def safe_sqrt(x: Array) -> Array:
@@ -107,6 +137,8 @@ class Objective(eqx.Module):
     fill: FillPolicy = eqx.field(static=True)
     estimator: EstimatorConfig = eqx.field(static=True)
     scenario_names: tuple[str, ...] = eqx.field(static=True)
+    question: Question = eqx.field(static=True, default="eq12")
+    miss_penalty_m2: float = eqx.field(static=True, default=100.0)
 
     # Identity hashing lets `jax.jit(E)` take the module as the function to compile (a Module
     # hashes its fields by default, and arrays are not hashable). `jax.jit(E)` embeds E's data
@@ -120,7 +152,7 @@ class Objective(eqx.Module):
     def __call__(self, r: Params, mode: Mode = "soft", tau: float | Array = 1.0) -> Float[Array, ""]:
         """E [m] at r: soft (the estimator at temperature multiplier `tau`) or hard."""
         if mode == "hard":
-            return safe_sqrt(self.hard(r).e2)
+            return safe_sqrt(self.hard(r).objective)
         if mode != "soft":
             raise ValueError(f"mode must be 'soft' or 'hard', got {mode!r}")
         return safe_sqrt(self.e2(r, tau))
@@ -156,12 +188,28 @@ class Objective(eqx.Module):
     def _sq_error(self, pred: Float[Array, "N I F 2"]) -> Float[Array, "N F"]:
         return jnp.mean(jnp.sum((pred - self.data.gt_pred) ** 2, axis=-1), axis=1)
 
-    def _soft_mean(self, r: Params, tau, reduce: Callable[[Array], Array]) -> Array:
-        """reduce(predictions [N, I, F, 2]) with soft detections, averaged over the estimator's
-        samples (one pass for mean-field)."""
+    def _target_window(self, det: Detections) -> Float[Array, "N I W"]:
+        history = (self.spec.history_points - 1) * self.spec.frames_per_point(self.data.scenes.dt_s)
+        frames = jnp.asarray(self.frames)
+        return jax.vmap(lambda p: target_window(p, frames, history))(det.p_detect)
+
+    def _question(self, pred: Float[Array, "N I F 2"], tracked: Float[Array, "N I"]) -> Float[Array, ""]:
+        """The question's value [m^2] from predictions and the probability each instant is tracked."""
+        sq = jnp.mean(jnp.sum((pred - self.data.gt_pred) ** 2, axis=-1), axis=-1)  # [N, I]
+        w = self.data.weight
+        if self.question == "eq12":
+            return weighted_mean(jnp.mean(sq, axis=1), w)
+        seen = jnp.sum(w[:, None] * tracked)
+        error = jnp.sum(w[:, None] * tracked * sq) / (1.0 + seen)
+        missed = 1.0 - seen / (jnp.sum(w) * tracked.shape[1])
+        return error + self.miss_penalty_m2 * missed
+
+    def _soft_mean(self, r: Params, tau, reduce: Callable[[Array, Detections], Array]) -> Array:
+        """reduce(predictions [N, I, F, 2], detections) with soft detections, averaged over the
+        estimator's samples (one pass for mean-field)."""
         det = self.detections(r, "soft", tau)
         if self.estimator.kind != "mc":
-            return reduce(self._predict(det))
+            return reduce(self._predict(det), det)
 
         # Rematerialised: reverse mode would otherwise keep every sample's predictor activations
         # (on the default problem K = 64 asked for 35 GB); each sample's forward pass is
@@ -169,7 +217,8 @@ class Objective(eqx.Module):
         @jax.checkpoint
         def one_sample(uniform):
             sample = relaxed_bernoulli(det.p_detect, uniform, self.estimator.relax_temperature)
-            return reduce(self._predict(dataclasses.replace(det, p_detect=sample)))
+            d = dataclasses.replace(det, p_detect=sample)
+            return reduce(self._predict(d), d)
 
         return jnp.mean(jax.lax.map(one_sample, jnp.swapaxes(self.data.mc_uniform, 0, 1)), axis=0)
 
@@ -182,18 +231,21 @@ class Objective(eqx.Module):
         mean over n of the mean over h, so d/dr of any weighting of it says which variants and
         steps drive dE^2/dr.
         """
-        return self._soft_mean(r, tau, self._sq_error)
+        return self._soft_mean(r, tau, lambda pred, det: self._sq_error(pred))
 
     def e2(self, r: Params, tau: float | Array = 1.0) -> Float[Array, ""]:
-        """Soft E^2(r, tau) [m^2]: what solvers minimise (its gradient is finite everywhere)."""
-        per_variant = self._soft_mean(r, tau, lambda pred: jnp.mean(self._sq_error(pred), axis=1))
-        return weighted_mean(per_variant, self.data.weight)
+        """The soft value [m^2] solvers minimise (its gradient is finite everywhere): E^2 of
+        Eq. 12, or J of the "tracked" question (module docstring)."""
+        return self._soft_mean(r, tau, lambda pred, det: self._question(pred, p_tracked(self._target_window(det))))
 
     def hard(self, r: Params) -> HardEvaluation:
-        """Hard E^2, its split by variant and step, and per-scenario RMSE against the true future."""
-        pred = self._predict(self.detections(r, "hard"))
+        """Hard E^2, its splits (variant and step, instant, coverage) and per-scenario RMSE
+        against the true future."""
+        det = self.detections(r, "hard")
+        pred = self._predict(det)
         sq = self._sq_error(pred)
         e2 = weighted_mean(jnp.mean(sq, axis=1), self.data.weight)
+        coverage = jax.vmap(coverage_classes)(self._target_window(det))
         onehot = jax.nn.one_hot(self.data.scenario, len(self.scenario_names)) * self.data.weight[:, None]
         count = jnp.maximum(jnp.sum(onehot, axis=0), 1.0)[:, None]  # a scenario may be absent
 
@@ -201,7 +253,13 @@ class Objective(eqx.Module):
             per_variant = jnp.mean(jnp.sum((p - self.data.true_fut) ** 2, axis=-1), axis=1)  # [N, F]
             return safe_sqrt(onehot.T @ per_variant / count)
 
-        return HardEvaluation(e2=e2, sq_error=sq, rmse_gt=rmse(self.data.gt_pred), rmse_sensor=rmse(pred))
+        def sq_true(p):
+            return jnp.sum((p - self.data.true_fut) ** 2, axis=-1)  # [N, I, F]
+
+        return HardEvaluation(e2=e2, sq_error=sq, rmse_gt=rmse(self.data.gt_pred), rmse_sensor=rmse(pred),
+                              sq_instant=jnp.mean(jnp.sum((pred - self.data.gt_pred) ** 2, axis=-1), axis=-1),
+                              coverage=coverage, sq_true_gt=sq_true(self.data.gt_pred), sq_true_sensor=sq_true(pred),
+                              objective=self._question(pred, coverage[..., 1]))
 
     def point(self, values) -> dict[str, Array]:
         """r as a dict from values in the order of `names` (a scalar for one parameter)."""
