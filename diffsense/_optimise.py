@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense import config as cfgio
+from diffsense._answer import near_optimal
 from diffsense._breakdown import breakdown, tracked_summary
 from diffsense._problem import Problem
 from diffsense._result import Curves, Result
@@ -165,10 +166,12 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         say(f"{problem.sensor_kind}: dense hard grid every {problem.dense_check:g} {spec.unit}")
         dense = _dense_check(ev, result, lo, hi, problem.dense_check)
         result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + dense["verdict"]))
+    answer = near_optimal([(x[0], ev.e_hard(x[0])) for x in ev.hard_points()], lo, hi, result.r_star)
     return Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
         r_star={name: float(result.r_star)}, E_hard_star=float(result.E_hard_star),
         E_soft_star=float(result.E_soft_star), solve=result,
         programs_run={"solve": solve_counts, "figures": figure_counts},
         wall_s={"compile": clock.compile_s, "run": clock.run_s}, scenarios=tuple(E.scenario_names),
-        config=_config(problem), curves=curves, dense_check=dense, **parts)
+        config=_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
+        flags=tuple(answer["flags"]), **parts)

@@ -31,6 +31,9 @@ result.json schema (every key always present; non-finite numbers are written as 
     "tracked"       {"E_tracked": m, "missed_share": f, "J_m2": m^2, "miss_penalty_m2": m^2}
                              at r*: the "tracked" question's pieces (whichever was optimised)
     "sweep" entries also hold "by_scenario" and "coverage" at their step.
+    "near_optimal"  {"tolerance_m": m, "intervals": [[lo, hi], ...]}  every evaluated r whose E_hard
+                             is within the tolerance of the best (`diffsense._answer`)
+    "flags"         [string, ...]  "pressing_on_bound", "flat" (`diffsense._answer`)
     "scenarios"     [string, ...]
     "config"        object   the problem as plain JSON
     "versions"      {"python", "jax", ..., "diffsense": string}
@@ -54,7 +57,8 @@ from diffsense.solve import SolveResult
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
-               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "scenarios", "config", "versions")
+               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "scenarios",
+               "config", "versions")
 
 
 def versions() -> dict[str, str]:
@@ -137,6 +141,8 @@ class Result:
     breakdown: dict[str, Any] | None = None
     sweep_breakdown: tuple[dict[str, Any], ...] = ()
     tracked: dict[str, Any] | None = None
+    near_optimal: dict[str, Any] | None = None
+    flags: tuple[str, ...] = ()
 
     @property
     def sweep(self):
@@ -187,6 +193,8 @@ class Result:
             "by_horizon": (self.breakdown or {}).get("by_horizon"),
             "coverage": (self.breakdown or {}).get("coverage"),
             "tracked": self.tracked,
+            "near_optimal": self.near_optimal,
+            "flags": list(self.flags),
             "scenarios": list(self.scenarios),
             "config": self.config,
             "versions": versions(),

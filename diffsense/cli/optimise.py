@@ -164,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if len(results) > 1 else ""))
     for content in results.values():
         print("\n" + report.summary_table(content, unit=content["units"][content["param"]]))
+        print(report.breakdown_table(content))
     if len(results) > 1:
         print("\nradar versus camera\n" + table)
     return 0

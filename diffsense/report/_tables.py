@@ -70,6 +70,10 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
         f"wall {wall['compile']:.1f} s compile + {wall['run']:.1f} s run",
     ]
     lines += [f"note: {n}" for n in result.get("notes", [])]
+    from diffsense._answer import explain
+
+    near = result.get("near_optimal") or {}
+    lines += [f"warning: {w}" for w in explain(result.get("flags", []), near.get("intervals", []), unit)]
     return "\n".join(lines)
 
 
@@ -108,3 +112,24 @@ def comparison_table(
             f"(E_hard = {_cell(results[winner]['E_hard_star'])} m)",
         ]
     )
+
+
+def breakdown_table(result: Mapping[str, Any]) -> str:
+    """What E at r* is made of: per scenario and per coverage class, with the shares of instants
+    whose target was detected at the instant, in the window and throughout it."""
+    rows = []
+    for name, part in (result.get("by_scenario") or {}).items():
+        c = part["coverage"]
+        rows.append([name, part["E_hard"], c["at_instant"], c["in_window"], c["throughout"]])
+    c = result.get("coverage")
+    if not c:
+        return ""
+    rows.append(["pooled", result["E_hard_star"], c["at_instant"], c["in_window"], c["throughout"]])
+    parts = ", ".join(f"{k} {v['share']:.0%} of instants, E {_cell(v['E_hard'])} m" for k, v in c["parts"].items())
+    lines = [format_table(["at r*", "E_hard [m]", "seen at t", "in window", "throughout"], rows),
+             f"by coverage: {parts}"]
+    t = result.get("tracked")
+    if t:
+        lines.append(f"tracked question: E over tracked instants {_cell(t['E_tracked'])} m, "
+                     f"missed share {t['missed_share']:.1%}, J {_cell(t['J_m2'])} m^2")
+    return "\n".join(lines)

@@ -74,6 +74,10 @@ class Evaluator:
                 self._progress("hard", float(np.sqrt(max(float(out.e2), 0.0))), 0.0)
         return self._hard[key]
 
+    def hard_points(self) -> list[tuple[float, ...]]:
+        """Every point evaluated on the hard objective so far."""
+        return list(self._hard)
+
     def e_hard(self, x) -> float:
         """E [m] with hard (0/1) detections."""
         return float(np.sqrt(max(float(self.hard(x).e2), 0.0)))
