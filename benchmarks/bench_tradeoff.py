@@ -3,6 +3,7 @@
     python benchmarks/bench_tradeoff.py [--variants-ref 16] [--grid-step 1] [--quick]
         [--mc-samples 1,4,16,64] [--mc-cost-only K,...] [--taus 0.5,2,4] [--variant-counts 1,2,4]
         [--model PATH] [--scenarios sc01,...] [--variants 8] [--interval LO HI]
+        [--compilation-cache] [--json PATH]
 
 From the default of `python -m diffsense.optimise --param hfov --interval 30 180`
 (configs/optimise/default.toml: radar, six scenarios x 8 variants, mean-field estimator, final
@@ -19,13 +20,15 @@ Error is measured against a reference: a dense hard grid (--grid-step, deg) over
 every row's r* is evaluated on it: dE_hard = E_hard_ref(r*) - E_hard_ref(r*_ref) [m] (negative
 when r* beats every grid point).
 
-Columns: compile s, JAX compilation (trace, lowering, backend; diffsense._timing.CompileClock)
+Columns: compile s, JAX compilation (trace, lowering, backend; diffsense.report.CompileClock)
 of building the row's problem and of its search; build s, the rest of building the problem
 (scenes, ground-truth predictions); run s, the search without compilation; evaluations, the
 objective programs the search ran (soft value-and-gradient and hard). Rows marked * reuse the
 default's compiled problem (the temperature is a traced argument, and the hard estimator needs
 only the hard program): a fresh process would compile as much as the default row. Seeds are
-fixed (the config's seed 0): the same command gives the same r* and errors.
+fixed (the config's seed 0): the same command gives the same r* and errors. Compilation is cold
+(JAX's persistent cache off) unless --compilation-cache; --json writes every row, the reference
+grid and the Pareto rows (notebook 02 reads it).
 """
 
 from __future__ import annotations
@@ -33,11 +36,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import gc
+import json
 import os
 import platform
 import sys
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 KNOBS = ("default", "estimator", "temperature", "precision", "variants")
 # Every soft evaluation with K samples runs the CS-LSTM K times (about 2 s per sample on the
@@ -50,12 +55,12 @@ VARIANTS = (1, 2, 4)
 
 @dataclasses.dataclass(frozen=True)
 class Setting:
-    """One row: a knob, its setting, and the configs it runs with."""
+    """One row: a knob, its setting, and the problem it runs (`diffsense.Problem`, its solve
+    settings included)."""
 
     knob: str
     label: str
-    problem: object  # diffsense.metrics.ProblemConfig
-    solve: object  # diffsense.solve.SolveConfig
+    problem: object
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,15 +68,16 @@ class Reference:
     """The dense hard grid on many variants: the yardstick of every row.
 
     Attributes:
-        objective: the reference problem's objective (its `e_hard` is E_hard_ref).
+        evaluator: the reference objective's `diffsense.solve.Evaluator` (its `e_hard` is E_hard_ref).
         dense: the grid search (r [deg], E_hard [m]).
+        problem: the reference's `diffsense.Problem`.
         variants: variants per scenario [-]; grid_step: grid spacing [deg].
         compile_s, run_s: wall time of building the reference and of its grid [s].
     """
 
-    objective: object
+    evaluator: object
     dense: object
-    problem: object  # its ProblemConfig
+    problem: object
     variants: int
     grid_step: float
     compile_s: float
@@ -104,41 +110,38 @@ class Row:
     dE_hard: float  # E_hard_ref(r*) - E_hard_ref(r*_ref)
 
 
-def default_config(model: str | None = None, scenarios: Sequence[str] | None = None,
-                   variants: int | None = None, interval: tuple[float, float] | None = None):
-    """configs/optimise/default.toml, optionally with other weights, scenarios, variant count or
-    interval of the parameter [its units]."""
-    from diffsense import config as cfgio
-    from diffsense.metrics import check_interval, resolve_param
-    from diffsense.cli.optimise import OptimiseConfig
+def default_problem(model: str | None = None, scenarios: Sequence[str] | None = None,
+                    variants: int | None = None, interval: tuple[float, float] | None = None):
+    """configs/optimise/default.toml as a `diffsense.Problem`, optionally with other weights,
+    scenarios, variant count or interval of the parameter [its units]."""
+    import diffsense as ds
 
-    cfg = cfgio.load_default(OptimiseConfig, "optimise/default.toml")
-    if interval is not None:
-        spec = resolve_param(cfg.problem.sensor, cfg.problem.param)
-        lo, hi = float(interval[0]), float(interval[1])
-        check_interval(spec, lo, hi)
-        per_sensor = getattr(cfg.intervals, cfg.problem.sensor)
-        cfg = cfgio.replace(cfg, intervals=cfgio.replace(
-            cfg.intervals, **{cfg.problem.sensor: cfgio.replace(per_sensor, **{spec.name: (lo, hi)})}))
+    base = ds.Problem.from_toml(None)
     changes = {}
     if model:
-        changes["model"] = model
+        changes["predictor"] = model
     if scenarios:
         changes["scenarios"] = tuple(scenarios)
     if variants:
         changes["variants"] = variants
-    return cfgio.replace(cfg, problem=cfgio.replace(cfg.problem, **changes)) if changes else cfg
+    if interval is not None:
+        changes["params"] = {interval_name(base): (float(interval[0]), float(interval[1]))}
+    return dataclasses.replace(base, **changes) if changes else base
+
+
+def interval_name(problem) -> str:
+    """The one free parameter of a problem."""
+    (name,) = problem.params
+    return name
 
 
 def with_final_tau(solve_cfg, tau: float):
     """The continuation scaled so that its last level is `tau` (what `--tau` does)."""
-    from diffsense import config as cfgio
-
     last = solve_cfg.tau_schedule[-1]
-    return cfgio.replace(solve_cfg, tau_schedule=tuple(t * tau / last for t in solve_cfg.tau_schedule))
+    return dataclasses.replace(solve_cfg, tau_schedule=tuple(t * tau / last for t in solve_cfg.tau_schedule))
 
 
-def settings(cfg, quick: bool = False, mc_samples: Sequence[int] = MC_SAMPLES,
+def settings(problem, quick: bool = False, mc_samples: Sequence[int] = MC_SAMPLES,
              taus: Sequence[float] = TAUS, variants: Sequence[int] = VARIANTS) -> list[Setting]:
     """The default, then one knob changed at a time.
 
@@ -147,137 +150,116 @@ def settings(cfg, quick: bool = False, mc_samples: Sequence[int] = MC_SAMPLES,
     `variants` are the Monte-Carlo K, final temperature multipliers and variants per scenario
     tried (besides the hard estimator and the other float type).
     """
-    from diffsense import config as cfgio
-
-    p, s = cfg.problem, cfg.solve
+    replace = dataclasses.replace
+    p, s = problem, problem.solve
     mc = () if quick else tuple(mc_samples)
     taus = (2.0,) if quick else tuple(taus)
     variants = (2,) if quick else tuple(variants)
     est = p.estimator
     rows = [Setting("default", f"{est.kind}, tau {s.tau_schedule[-1]:g}, "
-                               f"{'float64' if p.float64 else 'float32'}, {p.variants} var", p, s)]
+                               f"{'float64' if p.float64 else 'float32'}, {p.variants} var", p)]
     for k in mc:
-        rows.append(Setting("estimator", f"mc K={k}",
-                            cfgio.replace(p, estimator=cfgio.replace(est, kind="mc", samples=k)), s))
-    rows.append(Setting("estimator", "hard", cfgio.replace(p, estimator=cfgio.replace(est, kind="hard")), s))
+        rows.append(Setting("estimator", f"mc K={k}", replace(p, estimator=replace(est, kind="mc", samples=k))))
+    rows.append(Setting("estimator", "hard", replace(p, estimator=replace(est, kind="hard"))))
     for tau in taus:
-        rows.append(Setting("temperature", f"tau {tau:g}", p, with_final_tau(s, tau)))
+        rows.append(Setting("temperature", f"tau {tau:g}", replace(p, solve=with_final_tau(s, tau))))
     other = "float32" if p.float64 else "float64"
-    rows.append(Setting("precision", other, cfgio.replace(p, float64=not p.float64),
-                        cfgio.replace(s, dtype=other)))
+    rows.append(Setting("precision", other, replace(p, float64=not p.float64, solve=replace(s, dtype=other))))
     for n in variants:
         if n != p.variants:
-            rows.append(Setting("variants", f"{n} var", cfgio.replace(p, variants=n), s))
+            rows.append(Setting("variants", f"{n} var", replace(p, variants=n)))
     return rows
 
 
-def _problem_key(problem_cfg):
-    """Problems that compile to the same programs: the hard estimator runs only the hard
-    program, which does not depend on the estimator's settings."""
-    from diffsense import config as cfgio
+def objective_key(problem) -> tuple:
+    """Problems with the same E(r), which compile to the same programs: the solve settings do
+    not enter E, and the hard estimator runs only the hard program, which does not depend on
+    the estimator's settings."""
     from diffsense.metrics import EstimatorConfig
 
-    if problem_cfg.estimator.kind == "hard":
-        return cfgio.replace(problem_cfg, estimator=EstimatorConfig())
-    return problem_cfg
+    estimator = EstimatorConfig() if problem.estimator.kind == "hard" else problem.estimator
+    predictor = problem.predictor if isinstance(problem.predictor, str) else id(problem.predictor)
+    return (problem.sensor_kind, tuple(problem.scenarios), problem.variants, problem.seed, predictor,
+            problem.fill, estimator, problem.prediction_stride_frames, problem.background_vehicles, problem.float64)
 
 
-def _interval(cfg) -> tuple[float, float]:
-    from diffsense.metrics import check_interval, resolve_param
-
-    spec = resolve_param(cfg.problem.sensor, cfg.problem.param)
-    lo, hi = getattr(getattr(cfg.intervals, cfg.problem.sensor), spec.name)
-    check_interval(spec, lo, hi)
+def interval_of(problem) -> tuple[float, float]:
+    lo, hi = problem.params[interval_name(problem)]
     return float(lo), float(hi)
 
 
-def reference(cfg, predictor, variants: int, grid_step: float) -> Reference:
-    """The dense hard grid over the default interval on `variants` variants per scenario."""
-    from diffsense import config as cfgio
-    from diffsense._timing import CompileClock
-    from diffsense.metrics import build_problem
-    from diffsense.solve import dense_grid_search
+def reference(problem, predictor, variants: int, grid_step: float) -> Reference:
+    """The dense hard grid over the problem's interval on `variants` variants per scenario."""
+    import diffsense as ds
+    from diffsense import report, solve
+    from diffsense.metrics import EstimatorConfig
 
-    problem_cfg = cfgio.replace(_problem_key(cfg.problem), variants=variants)
-    with CompileClock() as clock:
-        problem = build_problem(problem_cfg, predictor=predictor)
-        dense = dense_grid_search(problem.objective.e_hard, _interval(cfg), grid_step)
-    return Reference(objective=problem.objective, dense=dense, problem=problem_cfg, variants=variants,
-                     grid_step=grid_step,
+    estimator = EstimatorConfig() if problem.estimator.kind == "hard" else problem.estimator
+    ref_problem = dataclasses.replace(problem, variants=variants, estimator=estimator)
+    with report.CompileClock() as clock:
+        ev = solve.Evaluator(ds.objective(ref_problem, predictor=predictor))
+        dense = solve.dense_grid_search(ev.e_hard, interval_of(problem), grid_step)
+    return Reference(evaluator=ev, dense=dense, problem=ref_problem, variants=variants, grid_step=grid_step,
                      compile_s=clock.compile_s, run_s=clock.run_s)
 
 
-def _search(obj, setting: Setting, cfg, interval):
-    """The main job's search on a built objective (diffsense.optimise's two paths)."""
-    import jax.numpy as jnp
-
-    from diffsense.solve import hard_grid_solve, solve
-
-    solve_cfg = setting.solve
-    if setting.problem.estimator.kind == "hard":
-        return hard_grid_solve(obj.e_hard, interval, max_evaluations=solve_cfg.max_evaluations)
-    e2_soft, e_hard = obj.solver_fns(jnp.float64 if solve_cfg.dtype == "float64" else jnp.float32)
-    return solve(e2_soft, e_hard, interval, config=solve_cfg)
-
-
-def measure(cfg, rows: Sequence[Setting], predictor, ref: Reference,
+def measure(rows: Sequence[Setting], predictor, ref: Reference,
             progress: Callable[[str], None] = lambda _: None) -> list[Row]:
-    """Run every setting's search, timed, and evaluate its r* on the reference."""
-    from diffsense._timing import CompileClock
-    from diffsense.metrics import build_problem
+    """Run every setting's search (`diffsense.optimise` on the setting's problem, figures off),
+    timed, and evaluate its r* on the reference."""
+    import diffsense as ds
+    from diffsense import report
 
-    interval = _interval(cfg)
-    keys = [_problem_key(s.problem) for s in rows]
-    built: dict = {ref.problem: ref.objective}  # a row on the reference's own problem reuses it
+    keys = [objective_key(s.problem) for s in rows]
+    ref_key = objective_key(ref.problem)
+    built = {ref_key: ref.evaluator.objective}  # a row on the reference's own problem reuses it
     out = []
     for i, (setting, key) in enumerate(zip(rows, keys)):
         progress(f"{setting.knob}: {setting.label}")
         shared = key in built
         compile_s = build_s = 0.0
         if not shared:
-            with CompileClock() as clock:
-                built[key] = build_problem(key, predictor=predictor).objective
+            with report.CompileClock() as clock:
+                built[key] = ds.objective(setting.problem, predictor=predictor)
             compile_s, build_s = clock.compile_s, clock.run_s
-        obj = built[key]
-        obj.forget()  # every row pays for its own evaluations
-        before = sum(obj.counts.values())
-        with CompileClock() as clock:
-            result = _search(obj, setting, cfg, interval)
-        evaluations = sum(obj.counts.values()) - before
-        e_ref = ref.objective.e_hard(result.r_star)
+        # optimise evaluates through a fresh evaluator: every row pays for its own evaluations.
+        with report.CompileClock() as clock:
+            result = ds.optimise(setting.problem, E=built[key], figures=False)
+        evaluations = sum(result.programs_run["solve"].values())
+        r_star = result.r_star[interval_name(setting.problem)]
+        e_ref = ref.evaluator.e_hard(r_star)
         out.append(Row(
             knob=setting.knob, label=setting.label, shared=shared,
             compile_s=compile_s + clock.compile_s, build_s=build_s, run_s=clock.run_s,
-            evaluations=evaluations, r_star=result.r_star, E_hard=result.E_hard_star, E_hard_ref=e_ref,
-            dr=abs(result.r_star - ref.r_star), dE_hard=e_ref - ref.E_star,
+            evaluations=evaluations, r_star=r_star, E_hard=result.E_hard_star, E_hard_ref=e_ref,
+            dr=abs(r_star - ref.r_star), dE_hard=e_ref - ref.E_star,
         ))
-        progress(f"  run {clock.run_s:.1f} s, {evaluations} evaluations, r* {result.r_star:.2f} deg, "
+        progress(f"  run {clock.run_s:.1f} s, {evaluations} evaluations, r* {r_star:.2f} deg, "
                  f"dE_hard {out[-1].dE_hard:+.4f} m")
-        if key not in keys[i + 1:] and key != ref.problem:
+        if key not in keys[i + 1:] and key != ref_key:
             del built[key]  # free its memory; no later row needs it
             gc.collect()
     return out
 
 
-def evaluation_cost(cfg, predictor, samples: Sequence[int]) -> list[tuple[str, float, float]]:
+def evaluation_cost(problem, predictor, samples: Sequence[int]) -> list[tuple[str, float, float]]:
     """(label, compile s, s per soft value-and-gradient) of the Monte-Carlo estimator with each K,
     without a solve: for K too costly to solve (every soft evaluation runs the CS-LSTM K times)."""
-    from diffsense import config as cfgio
-    from diffsense._timing import CompileClock
-    from diffsense.metrics import build_problem
+    import diffsense as ds
+    from diffsense import report, solve
 
-    lo, hi = _interval(cfg)
-    tau = cfg.solve.tau_schedule[-1]
+    lo, hi = interval_of(problem)
+    tau = problem.solve.tau_schedule[-1]
     out = []
     for k in samples:
-        est = cfgio.replace(cfg.problem.estimator, kind="mc", samples=k)
-        with CompileClock() as clock:
-            obj = build_problem(cfgio.replace(cfg.problem, estimator=est), predictor=predictor).objective
-            obj.value_and_grad(0.5 * (lo + hi), tau)  # compiles
+        est = dataclasses.replace(problem.estimator, kind="mc", samples=k)
+        with report.CompileClock() as clock:
+            ev = solve.Evaluator(ds.objective(dataclasses.replace(problem, estimator=est), predictor=predictor))
+            ev.value_and_grad(0.5 * (lo + hi), tau)  # compiles
         t0 = time.perf_counter()
-        obj.value_and_grad(0.5 * (lo + hi) + 1.0, tau)  # a new point: not memoised
+        ev.value_and_grad(0.5 * (lo + hi) + 1.0, tau)  # a new point: not memoised
         out.append((f"mc K={k}", clock.compile_s, time.perf_counter() - t0))
-        del obj
+        del ev
         gc.collect()
     return out
 
@@ -311,6 +293,26 @@ def table(rows: Sequence[Row], ref: Reference) -> str:
     return "\n".join(lines)
 
 
+def to_json(problem, rows: Sequence[Row], ref: Reference, costs) -> dict:
+    """Every number of the run, JSON-ready (what --json writes)."""
+    lo, hi = interval_of(problem)
+    return {
+        "problem": {"sensor": problem.sensor_kind, "param": interval_name(problem), "interval": [lo, hi],
+                    "scenarios": list(problem.scenarios), "variants": problem.variants},
+        "reference": {"variants": ref.variants, "grid_step": ref.grid_step, "evaluations": ref.dense.evaluations,
+                      "compile_s": ref.compile_s, "run_s": ref.run_s, "r_star": ref.r_star, "E_star": ref.E_star,
+                      "r": [float(v) for v in ref.dense.r], "E_hard": [float(v) for v in ref.dense.E_hard]},
+        "rows": [dataclasses.asdict(r) for r in rows],
+        "pareto": pareto(rows),
+        "cost_only": [{"label": label, "compile_s": c, "eval_s": e} for label, c, e in costs],
+        "table": table(rows, ref),
+    }
+
+
+def _numbers(text: str, kind: type) -> tuple:
+    return tuple(kind(x) for x in text.split(",") if x.strip())
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--variants-ref", type=int, default=16, help="variants per scenario of the reference")
@@ -329,12 +331,15 @@ def main() -> None:
     p.add_argument("--variants", type=int, default=None, help="variants per scenario of the default (config: 8)")
     p.add_argument("--interval", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                    help="the parameter's interval (default: the config's, HFOV 30 180 deg)")
+    p.add_argument("--compilation-cache", action="store_true",
+                   help="use JAX's persistent compilation cache (default: off, compile times are cold)")
+    p.add_argument("--json", type=Path, default=None, help="also write every number of the run to this file")
     args = p.parse_args()
 
-    from diffsense import cli as _cli
-    from diffsense.predictors import load_predictor
+    import diffsense as ds
+    from diffsense import cli
 
-    _cli.setup_jax(float64=True, compilation_cache=False)  # compile times are cold
+    cli.setup_jax(float64=True, compilation_cache=args.compilation_cache)
     import jax
 
     print(f"jax {jax.__version__} on {jax.default_backend()}, {os.cpu_count()} CPU cores, "
@@ -345,25 +350,25 @@ def main() -> None:
         print(f"[{time.perf_counter() - t0:7.1f} s] {message}", file=sys.stderr, flush=True)
 
     scenarios = [x.strip() for x in args.scenarios.split(",") if x.strip()] if args.scenarios else None
-    cfg = default_config(args.model, scenarios, args.variants, args.interval)
-    predictor = load_predictor(args.model)
+    problem = default_problem(args.model, scenarios, args.variants, args.interval)
+    predictor = ds.predictors.load_predictor(args.model)
     progress(f"reference: {args.variants_ref} variants, grid every {args.grid_step:g} deg")
-    ref = reference(cfg, predictor, args.variants_ref, args.grid_step)
-    mc = tuple(int(k) for k in args.mc_samples.split(",") if k.strip())
-    taus = tuple(float(t) for t in args.taus.split(",") if t.strip())
-    counts = tuple(int(n) for n in args.variant_counts.split(",") if n.strip())
-    rows = measure(cfg, settings(cfg, quick=args.quick, mc_samples=mc, taus=taus, variants=counts),
+    ref = reference(problem, predictor, args.variants_ref, args.grid_step)
+    rows = measure(settings(problem, quick=args.quick, mc_samples=_numbers(args.mc_samples, int),
+                            taus=_numbers(args.taus, float), variants=_numbers(args.variant_counts, int)),
                    predictor, ref, progress)
-    cost_only = tuple(int(k) for k in args.mc_cost_only.split(",") if k.strip())
+    cost_only = _numbers(args.mc_cost_only, int)
     if cost_only:
         progress(f"cost per evaluation of mc K={args.mc_cost_only}")
-    costs = evaluation_cost(cfg, predictor, cost_only)
+    costs = evaluation_cost(problem, predictor, cost_only)
     print(table(rows, ref))
     if costs:
         print("\nnot solved (cost per soft evaluation only; a solve runs the evaluations column's count):")
         print(f"{'estimator':<12} {'compile s':>9} {'s per soft value-and-gradient':>30}")
         for label, compile_s, eval_s in costs:
             print(f"{label:<12} {compile_s:9.1f} {eval_s:30.1f}")
+    if args.json:
+        args.json.write_text(json.dumps(to_json(problem, rows, ref, costs), indent=1) + "\n")
     print(f"total wall {time.perf_counter() - t0:.0f} s")
 
 
