@@ -1,9 +1,11 @@
 """The grid-search baseline: the continuous solve against grids, bounded Brent and a Bayesian optimiser.
 
-    nice -n 19 python benchmarks/bench_baseline.py [--variants 8] [--problems SENSOR:PARAM:LO:HI:STEP ...]
+    nice -n 19 python benchmarks/bench_baseline.py [--variants 8] [--scenarios sc01,...]
+        [--problems SENSOR:PARAM:LO:HI:STEP ...] [--brent-maxiter 100] [--trials 40] [--json PATH]
 
-On one objective E(r) (the main job's: diffsense.metrics.build_problem), every method below
-searches the same interval and is judged by the hard E of its answer:
+On one objective E(r) (the main job's: `diffsense.objective` of the default problem with the
+sensor and parameter of --problems), every method below searches the same interval and is
+judged by the hard E of its answer:
 
     continuous solve        diffsense.solve.solve: the paper's sweep, then optimistix refinement
     ... + reserved polish   the same with SolveConfig(reserve_polish=True) (not yet the default)
@@ -12,25 +14,30 @@ searches the same interval and is judged by the hard E of its answer:
     Brent on E_hard/E_soft  scipy.optimize.minimize_scalar(method="bounded"), derivative-free
     Bayesian (optuna TPE)   optional extra `baseline` (skipped with a line when not installed)
 
-Evaluations are the objective's compiled programs that actually ran (its own counters, memo
-misses only): hard = hard E, soft = soft E^2 value only, grad = soft E^2 value and gradient
-(the library serves every soft request of the solve, sweep values included, with the value-and-
-gradient program). The objective's programs are compiled once first (the solve's own root-find
-program compiles in its first call: JAX's measured compile time is taken off its wall time); the
-objective forgets its memo before each method, so no method reuses another's evaluations. E_hard(r*) of an answer the method did
-not evaluate itself is computed for the table and not counted.
+Evaluations are the objective's compiled programs that actually ran (the counters of a
+`diffsense.solve.Evaluator`, memo misses only): hard = hard E, soft = soft E^2 value only, grad =
+soft E^2 value and gradient (the evaluator serves every soft request of the solve, sweep values
+included, with the value-and-gradient program). The objective's programs are compiled once
+first (the solve's own root-find program compiles in its first call: JAX's measured compile time
+is taken off its wall time); every method gets a fresh evaluator, so no method reuses another's
+evaluations. E_hard(r*) of an answer the method did not evaluate itself is computed for the
+table and not counted. --json writes every comparison with each method's evaluation trace
+(notebook 03 reads it).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import os
 import platform
 import time
 from collections.abc import Callable
+from pathlib import Path
+
+import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 KINDS = ("hard", "soft", "grad")
@@ -39,7 +46,7 @@ KINDS = ("hard", "soft", "grad")
 # the HFOV, so the best value is the lower bound; radar range 30-200 m and camera HFOV 30-180 deg
 # were tried too: a plateau to the upper bound, and the lower bound).
 PROBLEMS = ("radar:hfov_deg:30:180:0.5", "radar:hfov_deg:5:60:0.5")
-# The objective's counter of each kind: the value-only program is the benchmark's own.
+# The evaluator's counter of each kind: the value-only program is the benchmark's own.
 _COUNTER = {"hard": "hard", "grad": "soft"}
 
 
@@ -48,7 +55,7 @@ class Setting:
     """One comparison: the problem and the size knobs of the methods.
 
     Attributes:
-        sensor, param: the free parameter (`param` as in diffsense.metrics.ProblemConfig).
+        sensor, param: the free parameter (`param` as `diffsense.Problem` takes it: "hfov_deg", "hfov").
         interval: (lo, hi) in the parameter's units.
         dense_step: spacing of the dense hard grid, parameter units.
         brent_maxiter: iteration cap of bounded Brent (it stops earlier at xatol).
@@ -115,22 +122,31 @@ class Comparison:
         return min(seen + [run.E_hard_star for run in self.runs])
 
 
-class Recorder:
-    """Counting wrappers on the objective's public evaluation methods, and a value-only soft
-    program. The solver callbacks of `Objective.solver_fns` look the methods up at call time,
-    so the solve's evaluations are recorded too; the objective's own counters cross-check."""
+@eqx.filter_jit
+def _e2_value(E, x, tau):
+    # The objective is an argument, not a closure, so XLA does not fold its data in as constants.
+    return E.e2(E.point(x), tau)
 
-    def __init__(self, obj):
-        self.obj = obj
+
+class Recorder:
+    """Per method, a fresh `diffsense.solve.Evaluator` of the objective with counting wrappers on
+    its evaluation methods, and a value-only soft program. The solver callbacks of
+    `Evaluator.solver_fns` look the methods up at call time, so the solve's evaluations are
+    recorded too; the evaluator's own counters cross-check. `scorer` evaluates off the books."""
+
+    def __init__(self, E):
+        from diffsense.solve import Evaluator
+
+        self.E = E
+        self.ev = Evaluator(E)
+        self.scorer = Evaluator(E)
         self.trace: list[Evaluation] = []
-        # The fixed data is an argument, as in the objective: XLA must not fold it in.
-        self._value_jit = jax.jit(obj.traced_e2)
 
     def _wrap(self, kind: str, method: Callable) -> Callable:
         def counted(r, *args):
-            before, t0 = self.obj.counts[_COUNTER[kind]], time.perf_counter()
+            before, t0 = self.ev.counts[_COUNTER[kind]], time.perf_counter()
             out = method(r, *args)
-            if self.obj.counts[_COUNTER[kind]] > before:  # a memo hit runs no program
+            if self.ev.counts[_COUNTER[kind]] > before:  # a memo hit runs no program
                 value = out[0] if isinstance(out, tuple) else out
                 self.trace.append(Evaluation(kind, float(r), float(value), time.perf_counter() - t0))
             return out
@@ -138,25 +154,25 @@ class Recorder:
         return counted
 
     def __enter__(self) -> Recorder:
+        from diffsense.solve import Evaluator
+
         self.trace = []
-        self.obj.forget()
-        self._start = dict(self.obj.counts)
-        self.obj.value_and_grad = self._wrap("grad", type(self.obj).value_and_grad.__get__(self.obj))
-        self.obj.e_hard = self._wrap("hard", type(self.obj).e_hard.__get__(self.obj))
+        self.ev = Evaluator(self.E)  # no method reuses another's evaluations
+        self.ev.value_and_grad = self._wrap("grad", self.ev.value_and_grad)
+        self.ev.e_hard = self._wrap("hard", self.ev.e_hard)
         return self
 
     def __exit__(self, *exc) -> None:
-        del self.obj.value_and_grad, self.obj.e_hard
         for kind, counter in _COUNTER.items():
-            ran = self.obj.counts[counter] - self._start[counter]
+            ran = self.ev.counts[counter]
             if exc[0] is None and ran != self.counts()[kind]:
-                raise RuntimeError(f"{kind}: the objective ran {ran} programs, the recorder saw {self.counts()[kind]}")
+                raise RuntimeError(f"{kind}: the evaluator ran {ran} programs, the recorder saw {self.counts()[kind]}")
 
     def e2_value(self, r: float, tau: float = 1.0) -> float:
         """Soft E^2 [m^2] at r without its gradient (what a derivative-free method needs)."""
         t0 = time.perf_counter()
-        dtype = self.obj.dtype
-        value = float(self._value_jit(jnp.asarray(r, dtype), jnp.asarray(tau, dtype), self.obj.data))
+        dtype = self.E.dtype
+        value = float(_e2_value(self.E, jax.numpy.asarray(r, dtype), jax.numpy.asarray(tau, dtype)))
         self.trace.append(Evaluation("soft", float(r), value, time.perf_counter() - t0))
         return value
 
@@ -164,7 +180,7 @@ class Recorder:
         return {k: sum(e.kind == k for e in self.trace) for k in KINDS}
 
     def run(self, name: str, search: Callable[[], float], note: str = "") -> MethodRun:
-        """Time `search() -> r*` with the memo cleared; E_hard(r*) afterwards, not counted."""
+        """Time `search() -> r*` on a fresh evaluator; E_hard(r*) afterwards, not counted."""
         with self:
             t0 = time.perf_counter()
             r_star = float(search())
@@ -172,18 +188,21 @@ class Recorder:
             trace = tuple(self.trace)
         e_star = next((e.value for e in trace if e.kind == "hard" and e.r == r_star), None)
         if e_star is None:
-            e_star = self.obj.e_hard(r_star)
+            e_star = self.scorer.e_hard(r_star)
         counts = {k: sum(e.kind == k for e in trace) for k in KINDS}
         return MethodRun(name, r_star, float(e_star), counts, wall, trace, note)
 
 
 def build(setting: Setting, variants: int, scenarios: tuple[str, ...] | None = None, predictor=None):
-    """The main job's problem for `setting` (shipped weights unless a predictor is given)."""
-    from diffsense.metrics import PAPER_SCENARIOS, ProblemConfig, build_problem
+    """The main job's problem for `setting` and its objective (shipped weights unless a
+    predictor is given): (`diffsense.Problem`, E)."""
+    import diffsense as ds
 
-    cfg = ProblemConfig(sensor=setting.sensor, param=setting.param, variants=variants,
-                        scenarios=tuple(scenarios or PAPER_SCENARIOS))
-    return build_problem(cfg, predictor=predictor)
+    fields = {"sensor": setting.sensor, "params": {setting.param: setting.interval}, "variants": variants}
+    if scenarios:
+        fields["scenarios"] = tuple(scenarios)
+    problem = ds.Problem.from_toml(None, **fields)
+    return problem, ds.objective(problem, predictor=predictor)
 
 
 def _brent(f: Callable[[float], float], setting: Setting) -> float:
@@ -212,9 +231,9 @@ def optuna_available() -> bool:
     return True
 
 
-def compare(problem, setting: Setting) -> Comparison:
-    """Run every method on `problem.objective` (see the module docstring)."""
-    from diffsense._timing import CompileClock
+def compare(problem, E, setting: Setting) -> Comparison:
+    """Run every method on the objective E of `problem` (see the module docstring)."""
+    from diffsense import report
     from diffsense.solve import (
         PAPER_HFOV_STEPS_DEG,
         DenseGrid,
@@ -224,13 +243,14 @@ def compare(problem, setting: Setting) -> Comparison:
         solve,
     )
 
-    obj = problem.objective
     lo, hi = setting.interval
-    rec = Recorder(obj)
-    e2_soft, e_hard = obj.solver_fns()
+    rec = Recorder(E)
     # Compile the objective's programs (hard, value and gradient, value only) once.
-    obj.e_hard(lo), obj.value_and_grad(lo), rec.e2_value(lo)
+    rec.scorer.e_hard(lo), rec.scorer.value_and_grad(lo), rec.e2_value(lo)
     import scipy.optimize  # noqa: F401  (its first import takes a second: not a method's cost)
+
+    def e_hard(r):  # the current method's evaluator, looked up at call time
+        return rec.ev.e_hard(r)
 
     runs, skipped = [], []
     result = {}
@@ -239,8 +259,8 @@ def compare(problem, setting: Setting) -> Comparison:
         def search():
             # The solve's own root-find program compiles in its first call: JAX's compile time
             # is measured (CompileClock) and taken off the solve's wall time below.
-            with CompileClock() as clock:
-                result["solve"] = solve(e2_soft, e_hard, (lo, hi), config=config)
+            with report.CompileClock() as clock:
+                result["solve"] = solve(*rec.ev.solver_fns(), (lo, hi), config=config)
             result["compile_s"] = clock.compile_s
             return result["solve"].r_star
 
@@ -259,7 +279,7 @@ def compare(problem, setting: Setting) -> Comparison:
     steps = default_steps(lo, hi)
 
     def grid():
-        e = [obj.e_hard(float(r)) for r in steps]
+        e = [e_hard(float(r)) for r in steps]
         return float(steps[int(np.argmin(e))])
 
     paper = setting.param.startswith("hfov") and tuple(steps) == PAPER_HFOV_STEPS_DEG
@@ -268,22 +288,24 @@ def compare(problem, setting: Setting) -> Comparison:
     dense: dict[str, DenseGrid] = {}
 
     def dense_search():
-        dense["grid"] = dense_grid_search(lambda r: obj.e_hard(r), (lo, hi), setting.dense_step)
+        dense["grid"] = dense_grid_search(e_hard, (lo, hi), setting.dense_step)
         g = dense["grid"]
         return float(g.r[g.best_index])
 
     runs.append(rec.run(f"dense grid, step {setting.dense_step:g} (hard)", dense_search))
-    runs.append(rec.run("bounded Brent on E_hard (scipy)", lambda: _brent(lambda r: obj.e_hard(r), setting)))
+    runs.append(rec.run("bounded Brent on E_hard (scipy)", lambda: _brent(e_hard, setting)))
     runs.append(rec.run("bounded Brent on E_soft (scipy)", lambda: _brent(rec.e2_value, setting)))
     if optuna_available():
         runs.append(rec.run(f"Bayesian, optuna TPE, {setting.trials} trials (hard)",
-                            lambda: _optuna(lambda r: obj.e_hard(r), setting)))
+                            lambda: _optuna(e_hard, setting)))
     else:
         skipped.append("Bayesian (optuna TPE): skipped: optuna is not installed (pip install -e '.[baseline]')")
     every = [e for run in runs for e in run.trace]
     cost = {k: float(np.median([e.wall_s for e in every if e.kind == k])) for k in KINDS
             if any(e.kind == k for e in every)}
-    return Comparison(setting, problem.param.unit, tuple(runs), dense["grid"], tuple(skipped), cost)
+    (name,) = problem.params
+    unit = E.sensor.spec(name).unit
+    return Comparison(setting, unit, tuple(runs), dense["grid"], tuple(skipped), cost)
 
 
 def table(comp: Comparison) -> str:
@@ -315,21 +337,46 @@ def verdict(comp: Comparison) -> list[str]:
     return lines
 
 
-def best_so_far(obj, run: MethodRun) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def best_so_far(e_hard: Callable[[float], float], run: MethodRun) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(evaluations used, cumulative wall s, best E_hard among the points evaluated so far [m]).
 
     A point evaluated only softly gets its E_hard computed here, off the method's books (for the
     convergence figure; these evaluations are not counted against the method).
     """
-    e_hard = {e.r: e.value for e in run.trace if e.kind == "hard"}
+    hard = {e.r: e.value for e in run.trace if e.kind == "hard"}
     best, out = np.inf, []
     for e in run.trace:
-        if e.r not in e_hard:
-            e_hard[e.r] = obj.e_hard(e.r)
-        best = min(best, e_hard[e.r])
+        if e.r not in hard:
+            hard[e.r] = e_hard(e.r)
+        best = min(best, hard[e.r])
         out.append(best)
     n = np.arange(1, len(run.trace) + 1)
     return n, np.cumsum([e.wall_s for e in run.trace]), np.asarray(out)
+
+
+def convergence(E, comp: Comparison) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """`best_so_far` of every method of `comp`, soft-only points evaluated hard off the books."""
+    from diffsense.solve import Evaluator
+
+    e_hard = Evaluator(E).e_hard
+    return [best_so_far(e_hard, run) for run in comp.runs]
+
+
+def to_json(comp: Comparison, curves, scenarios: int, variants: int) -> dict:
+    """One comparison, every evaluation included, JSON-ready (what --json writes)."""
+    d = comp.dense
+    return {
+        "setting": dataclasses.asdict(comp.setting), "label": comp.setting.label, "unit": comp.unit,
+        "scenarios": scenarios, "variants": variants, "best": comp.best, "skipped": list(comp.skipped),
+        "cost_s": comp.cost_s, "table": table(comp), "verdict": verdict(comp),
+        "dense": {"r": [float(v) for v in d.r], "E_hard": [float(v) for v in d.E_hard],
+                  "best_index": int(d.best_index), "evaluations": int(d.evaluations)},
+        "runs": [{"name": run.name, "r_star": run.r_star, "E_hard_star": run.E_hard_star, "counts": run.counts,
+                  "evaluations": run.evaluations, "wall_s": run.wall_s, "note": run.note,
+                  "trace": [dataclasses.asdict(e) for e in run.trace],
+                  "best_so_far": {"n": n.tolist(), "wall_s": wall.tolist(), "E_hard": best.tolist()}}
+                 for run, (n, wall, best) in zip(comp.runs, curves)],
+    }
 
 
 def _parse_problem(text: str) -> tuple[str, str, tuple[float, float], float]:
@@ -349,29 +396,36 @@ def main() -> None:
                    "(default: %(default)s: the main job's radar HFOV and narrow radar HFOVs)")
     p.add_argument("--brent-maxiter", type=int, default=100)
     p.add_argument("--trials", type=int, default=40, help="Bayesian optimiser evaluations")
+    p.add_argument("--json", type=Path, default=None,
+                   help="also write every comparison, with each method's evaluations, to this file")
     args = p.parse_args()
 
-    from diffsense import cli as _cli
-    from diffsense.predictors import load_predictor
+    import diffsense as ds
+    from diffsense import cli
 
-    _cli.setup_jax(float64=True, compilation_cache=True)
+    cli.setup_jax(float64=True, compilation_cache=True)
     print(f"jax {jax.__version__} on {jax.default_backend()}, {os.cpu_count()} CPU cores, "
           f"{platform.processor() or platform.machine()}; variants per scenario {args.variants}")
-    predictor = load_predictor(None)
+    predictor = ds.predictors.load_predictor(None)
     scenarios = tuple(s for s in args.scenarios.split(",") if s) or None
-    problems = {}  # one E(r) per sensor parameter, whatever its interval
+    built = {}  # one E(r) per sensor parameter, whatever its interval
+    out = []
     for text in args.problems:
         sensor, param, interval, step = _parse_problem(text)
         setting = Setting(sensor, param, interval, dense_step=step,
                           brent_maxiter=args.brent_maxiter, trials=args.trials)
-        if (sensor, param) not in problems:
-            problems[sensor, param] = build(setting, args.variants, scenarios, predictor)
-        problem = problems[sensor, param]
-        comp = compare(problem, setting)
-        n = len(problem.scenario_names) * args.variants
+        if (sensor, param) not in built:
+            built[sensor, param] = build(setting, args.variants, scenarios, predictor)
+        problem, E = built[sensor, param]
+        comp = compare(problem, E, setting)
+        n = len(E.scenario_names) * args.variants
         print(f"\n{setting.label} ({n} scenes)")
         print(table(comp))
         print("\ncontinuous solve " + "\n                 ".join(verdict(comp)))
+        if args.json:
+            out.append(to_json(comp, convergence(E, comp), len(E.scenario_names), args.variants))
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1) + "\n")
 
 
 if __name__ == "__main__":
