@@ -41,6 +41,10 @@ def _export(rev: str, workdir: Path) -> str:
     workdir.mkdir(parents=True)
     archive = subprocess.run(["git", "archive", commit], cwd=ROOT, check=True, capture_output=True)
     subprocess.run(["tar", "-x", "-C", str(workdir)], input=archive.stdout, check=True)
+    # The editable install maps the package diffsense._configs to the working tree's configs/:
+    # a real package of that name inside the copy shadows it, so the commit's configs are read.
+    shutil.copytree(workdir / "configs", workdir / "diffsense" / "_configs")
+    (workdir / "diffsense" / "_configs" / "__init__.py").touch()
     return commit
 
 
