@@ -27,7 +27,6 @@ from diffsense.errors import InputError
 from diffsense.metrics import Objective, make_objective, simulate_scenes
 from diffsense.predictors import load_predictor
 from diffsense.scene import ROLE_NAMES
-from diffsense.sensors import make_sensor
 from diffsense.solve import Evaluator, basin_check, dense_grid_search, hard_grid_solve, solve
 from diffsense.tracks import prediction_frames
 
@@ -53,7 +52,7 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     draw fixed by `problem.seed`. `predictor` (optional) replaces `problem.predictor` (an
     already loaded one, to load it once for several problems)."""
     dtype = _precision(problem.float64)
-    sensor = make_sensor(problem.sensor)
+    sensor = problem.make_sensor()
     predictor = _predictor(problem) if predictor is None else predictor
     scene_key, noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))
     scenes, index, names = simulate_scenes(

@@ -39,7 +39,11 @@ class Problem:
         seed: fixes scene variants, measurement noise and Monte-Carlo draws.
         predictor: "" for the shipped CS-LSTM weights, a weight/checkpoint path, or any object
             implementing `diffsense.predictors.Predictor`.
-        fill: missing-detection policy: "zero", "hold" or "interp".
+        profile: the sensors' shipped constants: "physical" (the default) or "paper" (the
+            paper's experimental design: see configs/sensors/paper/).
+        sensor_config: a TOML of sensor constants (any subset) replacing the profile's.
+        fill: missing-detection policy: "zero", "hold" or "interp" (None: the profile's, "hold"
+            for physical, the paper's "zero" for paper).
         estimator: how detection uncertainty enters ("mean-field", "mc", "hard", or an
             `EstimatorConfig` with its knobs).
         prediction_stride_frames: one prediction instant every this many scene frames [-].
@@ -60,7 +64,9 @@ class Problem:
     variants: int = 8
     seed: int = 0
     predictor: str | Predictor = ""
-    fill: str = "hold"
+    profile: str = "physical"
+    sensor_config: str | None = None
+    fill: str | None = None
     estimator: str | EstimatorConfig = "mean-field"
     prediction_stride_frames: int = 4
     background_vehicles: int = 0
@@ -73,8 +79,10 @@ class Problem:
     extra_curve_points: int = 0
 
     def __post_init__(self):
-        sensor = make_sensor(self.sensor)
+        sensor = self.make_sensor()
         set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        if self.fill is None:
+            set_("fill", "zero" if self.profile == "paper" else "hold")
         set_("params", _resolve_params(sensor, self.params))
         names = self.scenarios.split(",") if isinstance(self.scenarios, str) else list(self.scenarios)
         names = [str(n).strip() for n in names]
@@ -108,14 +116,18 @@ class Problem:
                 if (hi - lo) / self.dense_check > 100_000:
                     raise InputError(f"dense_check {self.dense_check:g} makes over 100,000 points on [{lo:g}, {hi:g}]")
 
+    def make_sensor(self) -> Sensor:
+        """The sensor with the problem's profile and sensor config."""
+        return make_sensor(self.sensor, self.sensor_config, self.profile)
+
     @property
     def sensor_kind(self) -> str:
         """The sensor's short name ("radar", "camera", or a custom sensor's)."""
-        return make_sensor(self.sensor).kind
+        return self.make_sensor().kind
 
     def specs(self) -> dict[str, ParamSpec]:
         """The spec (unit, domain, default) of every free parameter."""
-        sensor = make_sensor(self.sensor)
+        sensor = self.make_sensor()
         return {name: sensor.spec(name) for name in self.params}
 
     @classmethod
@@ -189,7 +201,9 @@ class ProblemSection:
     scenarios: tuple[str, ...] = PAPER_SCENARIOS
     variants: int = 8
     model: str = ""
-    fill: str = "hold"
+    profile: str = "physical"
+    sensor_config: str = ""
+    fill: str = ""
     estimator: EstimatorConfig = EstimatorConfig()
     seed: int = 0
     prediction_stride_frames: int = 4
@@ -216,28 +230,9 @@ class Settings:
     intervals: dict[str, dict[str, tuple[float, float]]] = dataclasses.field(default_factory=dict)
 
 
-def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for key, value in extra.items():
-        out[key] = _merge(base[key], value) if isinstance(value, dict) and isinstance(base.get(key), dict) else value
-    return out
-
-
 def load_settings(path: str | Path | None = None) -> Settings:
     """The shipped optimise config, with the keys of the TOML at `path` (if any) replacing its."""
-    defaults = cfgio.parse_toml(cfgio.default_text("optimise/default.toml"), "configs/optimise/default.toml")
-    if path is None:
-        return cfgio.from_dict(Settings, defaults)
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"cannot read config {path}: {e.strerror if isinstance(e, OSError) else e}") from None
-    try:
-        return cfgio.from_dict(Settings, _merge(defaults, cfgio.parse_toml(text, str(path))))
-    except InputError as e:
-        msg = str(e)
-        raise InputError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from None
+    return cfgio.load_layers(Settings, ["optimise/default.toml"], path)
 
 
 def problem_fields(settings: Settings, sensor: str | None = None, param: str | None = None,
@@ -251,6 +246,7 @@ def problem_fields(settings: Settings, sensor: str | None = None, param: str | N
         if interval is None:
             raise InputError(f"no interval for {sensor} {name}: give one (--interval LO HI, or [intervals.{sensor}])")
     return dict(sensor=sensor, params={name: tuple(interval)}, scenarios=p.scenarios, variants=p.variants,
-                seed=p.seed, predictor=p.model, fill=p.fill, estimator=p.estimator,
+                seed=p.seed, predictor=p.model, fill=p.fill or None, estimator=p.estimator,
+                profile=p.profile, sensor_config=p.sensor_config or None,
                 prediction_stride_frames=p.prediction_stride_frames, background_vehicles=p.background_vehicles,
                 float64=p.float64, objective=p.objective, miss_penalty_m2=p.miss_penalty_m2, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)

@@ -42,7 +42,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", help="comma-separated scenario names or TOML paths")
     p.add_argument("--variants", type=int, help="variants per scenario")
     p.add_argument("--model", help="predictor weights (.msgpack of this project or a PyTorch checkpoint)")
-    p.add_argument("--fill", choices=("zero", "hold", "interp"), help="missing-detection policy")
+    p.add_argument("--profile", choices=("physical", "paper"),
+                   help="the sensors' shipped constants: physical (default) or paper (the paper's design)")
+    p.add_argument("--sensor-config", metavar="FILE", help="TOML of sensor constants (any subset) replacing the profile's")
+    p.add_argument("--fill", choices=("zero", "hold", "interp"), help="missing-detection policy (default: the profile's)")
     p.add_argument("--estimator", choices=("mean-field", "mc", "hard"), help="how detection uncertainty enters")
     p.add_argument("--mc-samples", type=int, help="Monte-Carlo samples K (--estimator mc)")
     p.add_argument("--objective", choices=("eq12", "tracked"),
@@ -86,7 +89,8 @@ def problems(args: argparse.Namespace) -> list:
         if args.scenarios is not None:
             fields["scenarios"] = args.scenarios
         for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed"),
-                          ("objective", "objective"), ("miss_penalty", "miss_penalty_m2")):
+                          ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"),
+                          ("profile", "profile"), ("sensor_config", "sensor_config")):
             if getattr(args, flag) is not None:
                 fields[key] = getattr(args, flag)
         estimator = to_dict(settings.problem.estimator)

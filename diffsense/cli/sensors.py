@@ -36,7 +36,9 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     p = sub.add_parser("inspect", help="link budget / coverage of sensor settings")
     p.add_argument("--sensor", required=True, choices=("radar", "camera"))
-    p.add_argument("--config", help="sensor TOML (default: the shipped configs/sensors/<sensor>.toml)")
+    p.add_argument("--config", help="TOML of sensor constants (any subset) replacing the profile's")
+    p.add_argument("--profile", choices=("physical", "paper"), default="physical",
+                   help="the shipped constants: physical (default) or paper (the paper's design)")
     p.add_argument("--hfov", help="HFOV [deg], or a comma-separated list (default: the config's)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="another parameter value, e.g. range_m=150 (repeatable)")
@@ -126,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     from diffsense.sensors import load_config
     from diffsense.sensors._inspect import boresight_report
 
-    config = load_config(args.sensor, args.config)
+    config = load_config(args.sensor, args.config, args.profile)
     settings = _settings(args, config)
     probe = dict(kind=_KINDS.index(args.kind), length_m=args.length, width_m=args.width)
     rows = []

@@ -27,11 +27,20 @@ def camera_px_per_rad(params: CameraParams) -> Float[Array, ""]:
     return params.width_px / jnp.deg2rad(params.hfov_deg)
 
 
+def camera_accuracy_px_per_rad(params: CameraParams, config: CameraConfig) -> Float[Array, ""]:
+    """Pixels per radian that set the measurement accuracy: the lens's k (physical profile), or
+    the fixed `focal_length_px` when `accuracy_follows_hfov` is off (the paper profile: an
+    object-list sensor whose accuracy is Table II's whatever the swept HFOV) [px/rad]."""
+    if config.accuracy_follows_hfov:
+        return camera_px_per_rad(params)
+    return jnp.asarray(config.focal_length_px, jnp.result_type(params.hfov_deg, float))
+
+
 def camera_depth_sigma_m(
     range_m: Float[Array, "*S"], params: CameraParams, config: CameraConfig
 ) -> Float[Array, "*S"]:
     """Stereo depth noise sigma_Z = Z^2 disparity_error / (k baseline) [m]."""
-    k = camera_px_per_rad(params)
+    k = camera_accuracy_px_per_rad(params, config)
     return range_m**2 * config.disparity_error_px / (k * params.baseline_m)
 
 
@@ -49,7 +58,7 @@ def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mo
         ((1.0 - hidden) - config.min_visible_fraction, tau.visible * temperature),
     )
     depth_sigma = camera_depth_sigma_m(range_m, params, config)
-    bearing_sigma = config.bearing_error_px / k * jnp.ones_like(range_m)
+    bearing_sigma = config.bearing_error_px / camera_accuracy_px_per_rad(params, config) * jnp.ones_like(range_m)
     return gates, range_m, azimuth_rad, depth_sigma, bearing_sigma
 
 

@@ -84,7 +84,9 @@ def boresight_report(
     else:
         k = float(camera_px_per_rad(params))
         # Where the probe's width shrinks to min_width_px: 2 atan(w / 2R) k = min_width_px.
-        resolvable = 0.5 * width_m / math.tan(0.5 * config.min_width_px / k)
+        # (No resolvability gate, as in the paper profile: every range is resolvable.)
+        half_angle = 0.5 * config.min_width_px / k
+        resolvable = 0.5 * width_m / math.tan(half_angle) if half_angle > 0 else math.inf
         report |= {
             "px_per_rad": k,
             "width_px_at_range": 2.0 * math.atan2(0.5 * width_m, at_range_m) * k,

@@ -180,12 +180,15 @@ class RadarConfig:
     azimuth_accuracy_deg: float
     range_resolution_m: float
     azimuth_resolution_deg: float
+    gain_follows_hfov: bool = True
+    gain_hfov_deg: float = 30.0
 
     def __post_init__(self):
         check_params(self.params)
         for name in ("frequency_ghz", "noise_bandwidth_hz", "antenna_efficiency"):
             _require(getattr(self, name) > 0, f"radar {name} must be > 0")
         _require(self.antenna_efficiency <= 1, "radar antenna_efficiency must be <= 1")
+        _require(0 < self.gain_hfov_deg <= 360, "radar gain_hfov_deg must be in (0, 360]")
         for name in ("system_loss_db", "atmospheric_loss_db_per_km", "occlusion_loss_db",
                      "range_accuracy_m", "azimuth_accuracy_deg", "range_resolution_m",
                      "azimuth_resolution_deg"):
@@ -218,11 +221,14 @@ class CameraConfig:
     bearing_error_px: float
     min_width_px: float
     min_visible_fraction: float
+    accuracy_follows_hfov: bool = True
+    focal_length_px: float = 2400.0
 
     def __post_init__(self):
         check_params(self.params)
         for name in ("disparity_error_px", "bearing_error_px", "min_width_px"):
             _require(getattr(self, name) >= 0, f"camera {name} must be >= 0")
+        _require(self.focal_length_px > 0, "camera focal_length_px must be > 0")
         _require(0 <= self.min_visible_fraction <= 1,
                  "camera min_visible_fraction must be in [0, 1]")
 
@@ -246,12 +252,21 @@ def _sensor_name(sensor: str) -> str:
     return sensor
 
 
-def load_config(sensor: SensorName, path: str | Path | None = None) -> RadarConfig | CameraConfig:
-    """The sensor's config: the shipped `configs/sensors/<sensor>.toml`, or the TOML at `path`."""
+PROFILES: tuple[str, ...] = ("physical", "paper")
+
+
+def load_config(sensor: SensorName, path: str | Path | None = None, profile: str = "physical") -> RadarConfig | CameraConfig:
+    """The sensor's constants: the shipped profile, with the keys of the user TOML at `path`
+    (any subset of them; unknown keys and wrong types are refused) replacing its.
+
+    Profiles: "physical" is `configs/sensors/<sensor>.toml`; "paper" is that file with the keys
+    of `configs/sensors/paper/<sensor>.toml` replacing its (the paper's experimental design).
+    """
     cls = _CONFIG_CLASSES[_sensor_name(sensor)]
-    if path is None:
-        return _config.load_default(cls, f"sensors/{sensor}.toml")
-    return _config.load(cls, path)
+    if profile not in PROFILES:
+        raise InputError(f"unknown profile {profile!r} (known: {', '.join(PROFILES)})")
+    shipped = [f"sensors/{sensor}.toml"] + ([f"sensors/paper/{sensor}.toml"] if profile == "paper" else [])
+    return _config.load_layers(cls, shipped, path)
 
 
 def param_specs(

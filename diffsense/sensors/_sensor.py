@@ -86,8 +86,10 @@ def params_of(cls: type, r: Mapping[str, Any]) -> Any:
 _REGISTRY: dict[str, Callable[[], Sensor]] = {}
 
 
-def register(name: str, factory: Callable[[], Sensor]) -> None:
-    """Make a sensor available by name (`ds.Problem(sensor=name)`); `factory()` builds it."""
+def register(name: str, factory: Callable[..., Sensor]) -> None:
+    """Make a sensor available by name (`ds.Problem(sensor=name)`): `factory()` builds it with
+    its shipped constants, `factory(path, profile)` from a user TOML and a profile (a factory
+    that takes no arguments serves the default profile only)."""
     if not name or not name.replace("_", "").isalnum():
         raise InputError(f"a sensor name is letters, digits and '_', got {name!r}")
     _REGISTRY[name] = factory
@@ -98,13 +100,18 @@ def sensor_names() -> tuple[str, ...]:
     return tuple(_REGISTRY)
 
 
-def make_sensor(sensor: str | Sensor) -> Sensor:
-    """The registered sensor `name` with its shipped constants (a Sensor is returned as is)."""
+def make_sensor(sensor: str | Sensor, config: str | None = None, profile: str = "physical") -> Sensor:
+    """The registered sensor `name` of `profile`, with the constants of the TOML at `config`
+    replacing the profile's (a Sensor is returned as is, and then takes neither)."""
     if isinstance(sensor, Sensor):
+        if config is not None or profile != "physical":
+            raise InputError("a Sensor object carries its own constants: give no sensor config or profile with it")
         return sensor
     if sensor not in _REGISTRY:
         raise InputError(f"unknown sensor {sensor!r} (known: {', '.join(_REGISTRY)})")
-    return _REGISTRY[sensor]()
+    if config is None and profile == "physical":
+        return _REGISTRY[sensor]()
+    return _REGISTRY[sensor](config, profile)
 
 
 def as_scalar(value: Any, dtype) -> Array:

@@ -28,9 +28,10 @@ class Radar(Sensor):
     kind: ClassVar[str] = "radar"
 
     @classmethod
-    def from_toml(cls, path: str | Path | None = None) -> Radar:
-        """The radar with the constants of the TOML at `path` (None: the shipped ones)."""
-        return cls(load_config("radar", path))
+    def from_toml(cls, path: str | Path | None = None, profile: str = "physical") -> Radar:
+        """The radar of the shipped `profile` ("physical" or "paper"), with the keys of the TOML
+        at `path` (any subset of its constants) replacing the profile's."""
+        return cls(load_config("radar", path, profile))
 
     def param_specs(self) -> tuple[ParamSpec, ...]:
         return param_specs("radar", self.config)
@@ -54,9 +55,10 @@ class Camera(Sensor):
     kind: ClassVar[str] = "camera"
 
     @classmethod
-    def from_toml(cls, path: str | Path | None = None) -> Camera:
-        """The camera with the constants of the TOML at `path` (None: the shipped ones)."""
-        return cls(load_config("camera", path))
+    def from_toml(cls, path: str | Path | None = None, profile: str = "physical") -> Camera:
+        """The camera of the shipped `profile` ("physical" or "paper"), with the keys of the TOML
+        at `path` (any subset of its constants) replacing the profile's."""
+        return cls(load_config("camera", path, profile))
 
     def param_specs(self) -> tuple[ParamSpec, ...]:
         return param_specs("camera", self.config)
