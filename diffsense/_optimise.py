@@ -20,6 +20,7 @@ import numpy as np
 from diffsense import config as cfgio
 from diffsense._answer import near_optimal
 from diffsense._breakdown import breakdown, tracked_summary
+from diffsense._domain import domain_check, domain_note
 from diffsense._problem import Problem
 from diffsense._result import Curves, Result
 from diffsense._timing import CompileClock
@@ -147,6 +148,9 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
             "ground-truth predictions")
         E = objective(problem, predictor=predictor) if E is None else E
         ev = Evaluator(E)
+        domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
+        if domain_note(domain):
+            say("warning: " + domain_note(domain))
         say(f"{problem.sensor_kind}: stepped sweep and {'hard grid' if hard_only else 'continuous solve'} "
             f"of {name} over [{lo:g}, {hi:g}] {spec.unit}")
         if hard_only:
@@ -165,6 +169,8 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         say(f"{problem.sensor_kind}: dense hard grid every {problem.dense_check:g} {spec.unit}")
         dense = _dense_check(ev, result, lo, hi, problem.dense_check)
         result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + dense["verdict"]))
+    if domain_note(domain):
+        result = dataclasses.replace(result, notes=(*result.notes, domain_note(domain)))
     answer = near_optimal([(x[0], ev.e_hard(x[0])) for x in ev.hard_points()], lo, hi, result.r_star)
     return Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
@@ -173,4 +179,4 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         programs_run={"solve": solve_counts, "figures": figure_counts},
         wall_s={"compile": clock.compile_s, "run": clock.run_s}, scenarios=tuple(E.scenario_names),
         config=_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
-        flags=tuple(answer["flags"]), **parts)
+        flags=tuple(answer["flags"]), domain=domain, **parts)

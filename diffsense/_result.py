@@ -34,6 +34,9 @@ result.json schema (every key always present; non-finite numbers are written as 
     "near_optimal"  {"tolerance_m": m, "intervals": [[lo, hi], ...]}  every evaluated r whose E_hard
                              is within the tolerance of the best (`diffsense._answer`)
     "flags"         [string, ...]  "pressing_on_bound", "flat" (`diffsense._answer`)
+    "domain"        {"factor", "validation_rmse_m": [m at 1..5 s], "scenarios": {name: {"rmse_gt_m":
+                             [...], "inside": bool}}, "outside": [names]}  the predictor's domain
+                             check (`diffsense._domain`); a scenario outside it also gets a note
     "scenarios"     [string, ...]
     "config"        object   the problem as plain JSON
     "versions"      {"python", "jax", ..., "diffsense": string}
@@ -57,7 +60,7 @@ from diffsense.solve import SolveResult
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
-               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "scenarios",
+               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "scenarios",
                "config", "versions")
 
 
@@ -143,6 +146,7 @@ class Result:
     tracked: dict[str, Any] | None = None
     near_optimal: dict[str, Any] | None = None
     flags: tuple[str, ...] = ()
+    domain: dict[str, Any] | None = None
 
     @property
     def sweep(self):
@@ -195,6 +199,7 @@ class Result:
             "tracked": self.tracked,
             "near_optimal": self.near_optimal,
             "flags": list(self.flags),
+            "domain": self.domain,
             "scenarios": list(self.scenarios),
             "config": self.config,
             "versions": versions(),

@@ -40,7 +40,7 @@ from diffsense.predictors._convert import model_from_state_dict
 from diffsense.predictors._frame import model_to_si, si_to_model
 from diffsense.predictors._protocol import CSLSTM_SPEC, InputSpec, PredictorInputs
 from diffsense.predictors._model import N_LAT, CSLSTM, Prediction, new_model
-from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights
+from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights, read_card
 
 Mode = Literal["most_probable", "weighted"]
 
@@ -60,11 +60,15 @@ class CSLSTMPredictor:
     state: nnx.State
     graphdef: nnx.GraphDef = dataclasses.field(metadata=dict(static=True))
     maneuvers: bool = dataclasses.field(metadata=dict(static=True))
+    validation_rmse_m: tuple[float, ...] | None = dataclasses.field(default=None, metadata=dict(static=True))
 
     @classmethod
-    def from_model(cls, model: CSLSTM) -> CSLSTMPredictor:
+    def from_model(cls, model: CSLSTM, validation_rmse_m: tuple[float, ...] | None = None) -> CSLSTMPredictor:
+        """`validation_rmse_m`: the RMSE [m] at 1, 2, ... s on the data the weights were
+        validated on (the model card's), or None when unknown."""
         graphdef, state = nnx.split(model)
-        return cls(state=state, graphdef=graphdef, maneuvers=bool(model.maneuvers))
+        return cls(state=state, graphdef=graphdef, maneuvers=bool(model.maneuvers),
+                   validation_rmse_m=None if validation_rmse_m is None else tuple(map(float, validation_rmse_m)))
 
     def __call__(self, inputs: PredictorInputs) -> Float[Array, "B 25 2"]:
         """Future mean [B, 25, 2] in SI (the `Predictor` protocol)."""
@@ -92,11 +96,24 @@ def load_predictor(path: str | Path | None = None) -> CSLSTMPredictor:
                 f"no shipped weights at {DEFAULT_WEIGHTS}: train them with `python -m diffsense.train "
                 "--config configs/train/default.toml` or pass a checkpoint path"
             )
-        return CSLSTMPredictor.from_model(load_weights(DEFAULT_WEIGHTS))
+        return CSLSTMPredictor.from_model(load_weights(DEFAULT_WEIGHTS), _card_rmse(DEFAULT_WEIGHTS))
     path = Path(path)
     if path.suffix == ".msgpack":
-        return CSLSTMPredictor.from_model(load_weights(path))
-    return CSLSTMPredictor.from_model(model_from_state_dict(read_state_dict(path), str(path)))
+        return CSLSTMPredictor.from_model(load_weights(path), _card_rmse(path))
+    return CSLSTMPredictor.from_model(model_from_state_dict(read_state_dict(path), str(path)), PUBLISHED_NGSIM_RMSE_M)
+
+
+# Published NGSIM test RMSE of CS-LSTM at 1..5 s (Deo & Trivedi 2018, single-mode; the manoeuvre
+# variant is close): the validation figures of the published PyTorch checkpoints.
+PUBLISHED_NGSIM_RMSE_M = (0.61, 1.27, 2.09, 3.10, 4.37)
+
+
+def _card_rmse(weights_path: Path) -> tuple[float, ...] | None:
+    """The validation RMSE at 1..5 s of a weight file's model card (None without a card)."""
+    try:
+        return tuple(float(v) for v in read_card(weights_path)["validation"]["rmse_m"]["cslstm"])
+    except (InputError, KeyError, TypeError, ValueError):
+        return None
 
 
 def predict_model_frame(
