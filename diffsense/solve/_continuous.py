@@ -1,6 +1,6 @@
 """The continuous solve: the best r over an interval, refined from the stepped sweep.
 
-Strategy (DESIGN.md, "The solver"):
+Strategy:
 1. the sweep's best step on the HARD objective gives a bracket: its neighbouring steps;
 2. inside the bracket, the minimum of the SOFT objective E^2(r, tau) is found as the root of
    dE^2/dr with optimistix (`BracketedSecant`, or `optx.Bisection`), for each temperature of a
@@ -59,21 +59,23 @@ class SolveConfig:
         xtol_rel: tolerance on r at the last level, relative to the interval width (earlier
             levels use it scaled by tau / tau_last).
         max_evaluations: budget of the continuous solve: objective (soft and hard) plus
-            gradient evaluations (the issue's budget is 20).
+            gradient evaluations (20 by default).
         dtype: float type of the outer problem (r, tau).
         method: `secant` (BracketedSecant, warm-started) or `bisection` (optx.Bisection on
             the whole bracket at every level).
         hard_polish: most hard evaluations of the final compass search around r* (0: none);
             it only uses what the budget has left after the soft levels.
         reserve_polish: the soft levels leave `hard_polish` evaluations of the budget unspent, so
-            the polish always gets them. Off by default until the notebooks are re-measured
-            with it; on radar HFOV 5-60 deg (an interior optimum, where the continuation
-            otherwise spends the budget) it took the answer from E_hard 22.32 to 21.42 m, and
-            left the main job's answer unchanged (README, "The grid-search baseline").
+            the polish always gets them. Off by default (the speed/accuracy study of
+            notebook 02 is measured without it); on radar HFOV 5-60 deg, an interior optimum
+            where the continuation otherwise spends the budget, it takes the answer from E_hard
+            22.32 to 21.42 m and leaves the main job's answer unchanged (`python -m
+            diffsense.optimise --param hfov --interval 5 60 --config
+            configs/optimise/reserve_polish.toml`; docs, "The grid-search baseline").
 
     The defaults: three levels halving tau reach the best dense-grid basin of the rippled
     test objective where tau = 1 alone does not (tests/test_solve.py) and, with the secant,
-    fit the issue's budget of 20 evaluations; 1e-3 of 150 deg is 0.15 deg, finer than the
+    fit the budget of 20 evaluations; 1e-3 of 150 deg is 0.15 deg, finer than the
     0.5-deg dense reference grid.
     """
 

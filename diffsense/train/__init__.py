@@ -1,6 +1,6 @@
 """Training the CS-LSTM on generated traffic: samples, datasets and the training loop.
 
-    python -m diffsense.train generate --out DIR     # write a training set (the sample layout: _samples.py)
+    python -m diffsense.scene generate --out DIR     # write a training set (the sample layout: _samples.py)
     python -m diffsense.train --config FILE          # train on it
 
 `train(cfg)` runs the reference recipe (Adam, gradient clipping, MSE then NLL epochs) on the
