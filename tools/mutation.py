@@ -98,8 +98,11 @@ def _report(workdir: Path, package: str, commit: str, tests: list[str], command:
     lines += ["", f"Total: {sum(total.values())} mutants, " +
               ", ".join(f"{n} {s}" for s, n in sorted(total.items())), "", "## Survivors", ""]
     for name, status in sorted(results.items()):
-        if status != "killed":
-            lines += [f"### {name} ({status})", "```diff", _diff(workdir, name), "```", ""]
+        if status == "survived":
+            lines += [f"### {name}", "```diff", _diff(workdir, name), "```", ""]
+    others = sorted(f"{name} ({status})" for name, status in results.items()
+                    if status not in ("killed", "survived"))
+    lines += ["## Neither killed nor survived", ""] + [f"- {name}" for name in others]
     return "\n".join(lines)
 
 
@@ -110,18 +113,34 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rev", default="HEAD", help="commit to test (default HEAD)")
     parser.add_argument("--workdir", type=Path, help="scratch directory (default: a new temp dir)")
     parser.add_argument("--max-children", type=int, default=1, help="parallel mutants (default 1)")
+    parser.add_argument("--report-only", action="store_true",
+                        help="only (re)write the report of the finished run in --workdir")
     args = parser.parse_args(argv)
     if shutil.which("mutmut") is None:
         print("error: mutmut is not installed (pip install -e '.[mutation]')", file=sys.stderr)
         return 2
+    command = "python tools/mutation.py " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.report_only:
+        if args.workdir is None:
+            parser.error("--report-only needs the --workdir of the run")
+        tests = configparser.ConfigParser()
+        tests.read(args.workdir / "setup.cfg")
+        report = _report(args.workdir, args.package, "(as run)",
+                         tests["mutmut"]["pytest_add_cli_args_test_selection"].split(), command, 0.0)
+        (args.workdir / "report.md").write_text(report)
+        print(report)
+        return 0
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix=f"mutation-{args.package}-")) / "tree"
     commit = _export(args.rev, workdir)
     tests = _configure(workdir, args.package, args.files)
-    command = "python tools/mutation.py " + " ".join(argv if argv is not None else sys.argv[1:])
     print(f"mutating diffsense/{args.package} of {commit[:12]} in {workdir}", flush=True)
     start = time.perf_counter()
     run = subprocess.run(["mutmut", "run", "--max-children", str(args.max_children)], cwd=workdir)
     wall_s = time.perf_counter() - start
+    if not (workdir / "mutants" / "mutmut-stats.json").exists():
+        print(f"error: mutmut collected no test statistics (exit {run.returncode}): run the "
+              f"package's tests in {workdir} to see why", file=sys.stderr)
+        return 1
     report = _report(workdir, args.package, commit, tests, command, wall_s)
     (workdir / "report.md").write_text(report)
     print(report)
