@@ -28,7 +28,7 @@ from diffsense.errors import InputError
 from diffsense.metrics import Objective, make_objective, simulate_scenes
 from diffsense.predictors import load_predictor
 from diffsense.scene import ROLE_NAMES
-from diffsense.solve import Evaluator, basin_check, dense_grid_search, hard_grid_solve, solve
+from diffsense.solve import Evaluator, basin_check, default_steps, dense_grid_search, hard_grid_solve, solve
 from diffsense.tracks import prediction_frames
 
 Progress = Callable[[str], None]
@@ -126,8 +126,33 @@ def _dense_check(ev: Evaluator, result, lo: float, hi: float, step: float) -> di
     }
 
 
+def planned_evaluations(problem: Problem) -> int:
+    """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check)."""
+    (lo, hi), = problem.params.values()
+    steps = len(problem.steps) if problem.steps is not None else len(default_steps(lo, hi))
+    dense = 0 if problem.dense_check is None else int(math.ceil((hi - lo) / problem.dense_check - 1e-9)) + 1
+    return 2 * steps + problem.solve.max_evaluations + 2 + problem.extra_curve_points * 2 + dense
+
+
+def memory_estimate_bytes(problem: Problem) -> int:
+    """An upper estimate of the fixed data `objective(problem)` allocates [bytes]: scenes and noise
+    draws, and the Monte-Carlo estimator's uniforms (N variants x K samples x T frames x V
+    vehicles), which dominate for large K. V is bounded by every vehicle a scenario defines."""
+    from diffsense.scene import load_scenario
+
+    itemsize = 8 if problem.float64 else 4
+    total = 0
+    for name in problem.scenarios:
+        sc = load_scenario(name)
+        frames = int(round(sc.duration_s / 0.1)) + 1
+        vehicles = 5 + (problem.background_vehicles or sc.background.count)
+        k = problem.estimator.samples if problem.estimator.kind == "mc" else 0
+        total += problem.variants * frames * vehicles * itemsize * (k + 20)  # ~20 per-frame fields
+    return total
+
+
 def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = None, figures: bool = True,
-             progress: Progress | None = None) -> Result:
+             progress: Progress | None = None, on_evaluation: Callable[[dict], None] | None = None) -> Result:
     """The main job: argmin of E over the problem's box, cross-checked by the stepped sweep.
 
     One-parameter problems: the stepped sweep on E_hard, then the continuous solve inside the
@@ -135,6 +160,8 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     instead), the answer chosen on E_hard. With `figures`, the evaluations the figures draw
     are made too (`Result.curves`); with `problem.dense_check`, a dense E_hard grid.
     `E` reuses an already built `objective(problem)`; `predictor` an already loaded predictor.
+    `on_evaluation(event)` is called after every objective evaluation the run makes, with
+    {"kind": "soft" | "hard", "E_m", "tau", "done", "planned"} (for progress displays).
     """
     say = progress or (lambda message: None)
     if len(problem.params) != 1:
@@ -147,7 +174,13 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
             "ground-truth predictions")
         E = objective(problem, predictor=predictor) if E is None else E
-        ev = Evaluator(E)
+        planned = planned_evaluations(problem)
+
+        def counted(kind: str, e_m: float, tau: float) -> None:
+            if on_evaluation is not None:
+                on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": sum(ev.counts.values()), "planned": planned})
+
+        ev = Evaluator(E, progress=counted)
         domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
         if domain_note(domain):
             say("warning: " + domain_note(domain))

@@ -13,11 +13,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import sys
-import time
 from pathlib import Path
 
 from diffsense import cli as _cli
+from diffsense.cli._progress import Progress
 from diffsense.errors import InputError
 
 SENSOR_CHOICES = ("radar", "camera", "both")
@@ -58,6 +57,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--dense-check", type=float, metavar="STEP",
                    help="also evaluate E_hard every STEP (parameter units, e.g. 0.5 deg) over the "
                    "interval and report whether r* lies in the basin of the best dense point")
+    p.add_argument("--max-memory-gb", type=float, default=None,
+                   help="refuse a run whose estimated memory exceeds this (default: half the machine's memory)")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quiet", action="store_true", help="print only the summary table")
     return p
@@ -127,6 +128,24 @@ def _check_inputs(problems_: list) -> None:
             raise InputError(f"--model {problem.predictor}: not a file")
 
 
+def _check_memory(todo: list, max_memory_gb: float | None) -> None:
+    """Refuse, before any computation, a run whose estimated memory exceeds the limit."""
+    import os
+
+    from diffsense._optimise import memory_estimate_bytes
+
+    if max_memory_gb is None:
+        limit = 0.5 * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    elif math.isfinite(max_memory_gb) and max_memory_gb > 0:
+        limit = max_memory_gb * 1e9
+    else:
+        raise InputError(f"--max-memory-gb must be a positive number, got {max_memory_gb}")
+    need = max(memory_estimate_bytes(p) for p in todo)
+    if need > limit:
+        raise InputError(f"the run needs an estimated {need / 1e9:.1f} GB for its fixed data, over the limit of "
+                         f"{limit / 1e9:.1f} GB (fewer variants or Monte-Carlo samples, or --max-memory-gb)")
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     todo = problems(args)
@@ -137,6 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     from diffsense._io import check_writable, output_set
 
     check_writable(out)  # before any computation
+    _check_memory(todo, args.max_memory_gb)
 
     _cli.setup_jax(float64=todo[0].float64)
     import diffsense as ds
@@ -144,11 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     from diffsense._io import write_bytes
     from diffsense.predictors import load_predictor
 
-    t0 = time.perf_counter()
-
-    def progress(message: str) -> None:
-        if not args.quiet:
-            print(f"[{time.perf_counter() - t0:6.1f} s] {message}", file=sys.stderr, flush=True)
+    progress = Progress(args.quiet)
 
     model = todo[0].predictor
     predictor = load_predictor(model or None)  # a bad checkpoint fails before any output
@@ -159,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     with output_set(out) as staging:
         for problem in todo:
             folder = staging / problem.sensor_kind if len(todo) > 1 else staging
-            result = ds.optimise(problem, predictor=predictor, progress=progress)
+            result = ds.optimise(problem, predictor=predictor, progress=progress, on_evaluation=progress.evaluation)
             results[problem.sensor_kind] = report.write_run(result, folder)
         if len(results) > 1:
             first = next(iter(results.values()))
