@@ -45,8 +45,13 @@ def plot_objective(
     param: str = "r",
     scale: float = 1.0,
     unit: str = "",
+    title: str = "",
 ) -> None:
     """objective.png: E_soft(r), E_hard(r) [m] with the sweep and r*, dE/dr on a twin axis.
+
+    Only evaluated points are drawn as data: E_hard as markers (it is piecewise constant between
+    evaluations, with steps nobody evaluated), E_soft and dE/dr as markers joined by thin lines
+    that the legend calls interpolation. The legend sits outside the axes.
 
     Args:
         r, E_soft, E_hard, dE_dr: [n] curves over r (the objective's units; dE/dr in m per unit).
@@ -55,10 +60,10 @@ def plot_objective(
         param, scale, unit: x-axis name and display conversion (dE/dr is divided by scale).
     """
     x = np.asarray(r, dtype=float) * scale
-    fig = Figure(figsize=(7.0, 4.2))
+    fig = Figure(figsize=(7.5, 5.0), layout="constrained")
     ax = fig.add_subplot()
-    ax.plot(x, E_soft, color="C0", label="E soft")
-    ax.step(x, E_hard, where="mid", color="C1", label="E hard")
+    ax.plot(x, E_soft, color="C0", marker=".", linewidth=0.8, label="E soft (lines: interpolated)")
+    ax.plot(x, E_hard, linestyle="none", color="C1", marker="x", label="E hard (evaluated points)")
     sweep_r = [p["r"] * scale for p in sweep]
     ax.plot(sweep_r, [p["E_hard"] for p in sweep], "o", color="C1", label="sweep (hard)")
     r_star_label = f"r* = {_label(r_star, scale, unit)}"
@@ -67,13 +72,15 @@ def plot_objective(
     ax.set_ylabel("E_RMSE [m]")
     twin = ax.twinx()
     slope = np.asarray(dE_dr, dtype=float) / scale
-    twin.plot(x, slope, color="C2", alpha=0.6, label="dE/dr (soft)")
+    twin.plot(x, slope, color="C2", alpha=0.6, marker=".", linewidth=0.8, label="dE/dr soft (lines: interpolated)")
     twin.axhline(0.0, color="C2", linewidth=0.5)
     twin.set_ylabel(f"dE/d{param} [m/{unit}]" if unit else f"dE/d{param}")
     handles = ax.get_legend_handles_labels()
     twin_handles = twin.get_legend_handles_labels()
-    ax.legend(handles[0] + twin_handles[0], handles[1] + twin_handles[1], fontsize=8, loc="best")
-    fig.tight_layout()
+    fig.legend(handles[0] + twin_handles[0], handles[1] + twin_handles[1], fontsize=8, loc="outside lower center",
+               ncol=3)
+    if title:
+        fig.suptitle(title, fontsize=10)
     save_figure(fig, path, dpi=_DPI)
 
 
@@ -84,8 +91,10 @@ def plot_rmse_horizon(
     param: str = "r",
     scale: float = 1.0,
     unit: str = "",
+    title: str = "",
 ) -> None:
-    """rmse_horizon.png: per-horizon RMSE [m] per sweep step vs ground-truth inputs.
+    """rmse_horizon.png: per-horizon RMSE [m] per sweep step vs ground-truth inputs (every
+    horizon step is evaluated: the lines join evaluated points 0.2 s apart).
 
     Args:
         curves: scenario -> {"gt": [H] RMSE from ground-truth inputs,
@@ -98,7 +107,7 @@ def plot_rmse_horizon(
         raise ValueError("no scenarios to plot")
     ncols = min(2, len(names))
     nrows = math.ceil(len(names) / ncols)
-    fig = Figure(figsize=(5.0 * ncols, 3.2 * nrows))
+    fig = Figure(figsize=(max(5.0 * ncols, 8.0), 3.2 * nrows + 1.0), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax, name in zip(axes.flat, names):
         gt = np.asarray(curves[name]["gt"], dtype=float)
@@ -113,8 +122,10 @@ def plot_rmse_horizon(
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
-    axes.flat[0].legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncol=min(len(labels), 4))
+    if title:
+        fig.suptitle(title, fontsize=10)
     save_figure(fig, path, dpi=_DPI)
 
 
@@ -127,6 +138,7 @@ def plot_detection_timeline(
     param: str = "r",
     scale: float = 1.0,
     unit: str = "",
+    title: str = "",
 ) -> None:
     """The detection timeline: p_detect of each vehicle over time, one panel per r.
 
@@ -153,5 +165,7 @@ def plot_detection_timeline(
         ax.set_ylim(-0.1, len(roles))
         ax.set_title(f"{param} {_label(key, scale, unit)}", fontsize=9)
     axes[-1].set_xlabel("time [s]  (band height = detection probability)")
+    if title:
+        fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     save_figure(fig, path, dpi=_DPI)

@@ -21,11 +21,15 @@ def write_run(result: Any, folder: str | Path) -> dict[str, Any]:
     if c is None:
         return content
     name, unit = result.param, result.units[result.param]
+    variants = result.config.get("variants")
+    scenes = f"{', '.join(result.scenarios)} ({variants} variant{'s' if variants != 1 else ''} each)"
+    first = f"{result.scenarios[0]}, nominal variant"
     sweep = [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft} for p in result.sweep]
     plot_objective(folder / "objective.png", c.r, c.E_soft, c.E_hard, c.dE_dr, sweep, result.r_star[name],
-                   param=name, unit=unit)
+                   param=name, unit=unit, title=f"{result.sensor}: E over {name}, {scenes}")
     curves = {s: {"gt": c.horizon_gt[s], "steps": c.horizon_sensor[s]} for s in c.horizon_gt}
-    plot_rmse_horizon(folder / "rmse_horizon.png", curves, param=name, unit=unit)
+    plot_rmse_horizon(folder / "rmse_horizon.png", curves, param=name, unit=unit,
+                      title=f"{result.sensor}: RMSE against the true future per sweep step, {scenes}")
     plot_detection_timeline(folder / "detections.png", c.timeline, c.timeline_roles, dt_s=c.dt_s,
-                            param=name, unit=unit)
+                            param=name, unit=unit, title=f"{result.sensor}: hard detections, {first}")
     return content
