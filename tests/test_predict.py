@@ -243,27 +243,39 @@ def test_small_public_functions_under_jit_equal_eager():
         np.testing.assert_allclose(jax.jit(fn)(*args), fn(*args), rtol=1e-12, atol=1e-12)
 
 
+def _textbook_lstm(xs, w_ih, w_hh, b):
+    """The LSTM with logistic gates, one step at a time; xs [T, N, in] -> all h [T, N, H]."""
+
+    def step(carry, x):
+        h, c = carry
+        i, f, g, o = jnp.split(x @ w_ih + h @ w_hh + b, 4, axis=-1)
+        c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
+        h = jax.nn.sigmoid(o) * jnp.tanh(c)
+        return (h, c), h
+
+    zeros = jnp.zeros((xs.shape[1], w_hh.shape[0]), xs.dtype)
+    return jax.lax.scan(step, (zeros, zeros), xs)[1]
+
+
 def test_lstm_hand_written_backward_matches_autodiff():
-    from diffsense.predictors._layers import lstm_scan
-
-    def plain(xw, w_hh):  # the textbook LSTM with logistic gates, differentiated by JAX
-        hidden = w_hh.shape[0]
-
-        def step(carry, x):
-            h, c = carry
-            i, f, g, o = jnp.split(x + h @ w_hh, 4, axis=-1)
-            c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
-            h = jax.nn.sigmoid(o) * jnp.tanh(c)
-            return (h, c), h
-
-        zeros = jnp.zeros((xw.shape[1], hidden))
-        return jax.lax.scan(step, (zeros, zeros), xw)[1]
+    # Both recurrences, value and gradient w.r.t. every argument (weights too: training uses them),
+    # against JAX's autodiff of the textbook LSTM, in float64.
+    from diffsense.predictors._lstm import lstm_last, lstm_repeat
 
     rng = np.random.default_rng(13)
-    xw, w_hh = rng.normal(size=(5, 3, 16)), rng.normal(size=(4, 16))
-    probe = rng.normal(size=(5, 3, 4))
-    np.testing.assert_allclose(lstm_scan(xw, w_hh), plain(xw, w_hh), rtol=1e-13, atol=1e-14)
-    got = jax.grad(lambda a, b: jnp.sum(probe * lstm_scan(a, b)), argnums=(0, 1))(xw, w_hh)
-    want = jax.grad(lambda a, b: jnp.sum(probe * plain(a, b)), argnums=(0, 1))(xw, w_hh)
-    for g, w in zip(got, want):
-        np.testing.assert_allclose(g, w, rtol=1e-12, atol=1e-13)
+    t, n, n_in, hidden = 5, 3, 6, 4
+    w = [rng.normal(size=s) for s in ((n_in, 4 * hidden), (hidden, 4 * hidden), (4 * hidden,))]
+    xs, x1 = rng.normal(size=(t, n, n_in)), rng.normal(size=(n, n_in))
+    probe_last, probe_all = rng.normal(size=(n, hidden)), rng.normal(size=(t, n, hidden))
+    cases = [
+        (lambda x, *p: lstm_last(x, *p), lambda x, *p: _textbook_lstm(x, *p)[-1], xs, probe_last),
+        (lambda x, *p: lstm_repeat(t, x, *p), lambda x, *p: _textbook_lstm(jnp.broadcast_to(x, (t,) + x.shape), *p), x1, probe_all),
+    ]
+    for got_fn, want_fn, x, probe in cases:
+        np.testing.assert_allclose(got_fn(x, *w), want_fn(x, *w), rtol=1e-13, atol=1e-14)
+        got = jax.grad(lambda *a: jnp.sum(probe * got_fn(*a)), argnums=(0, 1, 2, 3))(x, *w)
+        want = jax.grad(lambda *a: jnp.sum(probe * want_fn(*a)), argnums=(0, 1, 2, 3))(x, *w)
+        for g, ref in zip(got, want):
+            np.testing.assert_allclose(g, ref, rtol=1e-12, atol=1e-13)
+        # Under jit as well (XLA fuses the unrolled forward differently from eager mode).
+        np.testing.assert_allclose(jax.jit(got_fn)(x, *w), want_fn(x, *w), rtol=1e-13, atol=1e-14)

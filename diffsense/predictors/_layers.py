@@ -14,6 +14,8 @@ import jax.numpy as jnp
 from flax import nnx
 from jaxtyping import Array, Float
 
+from diffsense.predictors._lstm import lstm_last, lstm_repeat
+
 
 def _uniform(rngs: nnx.Rngs, shape: tuple[int, ...], fan_in: int) -> jax.Array:
     bound = 1.0 / math.sqrt(fan_in)
@@ -50,79 +52,17 @@ class LSTM(nnx.Module):
         self.b_ih = nnx.Param(_uniform(rngs, (4 * hidden,), hidden))
         self.b_hh = nnx.Param(_uniform(rngs, (4 * hidden,), hidden))
 
-    def project(self, x: Float[Array, "... n_in"]) -> Float[Array, "... 4H"]:
-        """The input part of the gates, x @ w_ih + b_ih + b_hh, for all steps in one matmul."""
-        return x @ self.w_ih[...] + (self.b_ih[...] + self.b_hh[...])
+    def _weights(self):
+        return self.w_ih[...], self.w_hh[...], self.b_ih[...] + self.b_hh[...]
 
-    def scan(self, xw: Float[Array, "T N 4H"]) -> Float[Array, "T N H"]:
-        """Hidden states of all steps given the projected inputs (time-major)."""
-        return lstm_scan(xw, self.w_hh[...])
+    def final(self, x: Float[Array, "T N n_in"]) -> Float[Array, "N H"]:
+        """The last hidden state of each sequence (time-major input)."""
+        return lstm_last(x, *self._weights())
 
-    def final(self, xw: Float[Array, "T N 4H"]) -> Float[Array, "N H"]:
-        """The last hidden state."""
-        return lstm_scan(xw, self.w_hh[...])[-1]
-
-
-def _gate_scale(hidden: int, dtype) -> jax.Array:
-    # sigmoid(x) = (1 + tanh(x / 2)) / 2: one tanh over all four gates per step instead of three
-    # logistics and a tanh (measured 2-3x faster on this CPU; the same value up to rounding).
-    half = jnp.full((hidden,), 0.5, dtype)
-    return jnp.concatenate([half, half, jnp.ones((hidden,), dtype), half])
-
-
-def _forward(xw, w_hh):
-    hidden = w_hh.shape[0]
-    scale = _gate_scale(hidden, xw.dtype)
-
-    def step(carry, xw_t):
-        h, c = carry
-        t = jnp.tanh((xw_t + h @ w_hh) * scale)  # tanh of (i/2, f/2, g, o/2)
-        i, f, g, o = (t[..., k * hidden : (k + 1) * hidden] for k in range(4))
-        c_new = (0.5 + 0.5 * f) * c + (0.5 + 0.5 * i) * g
-        h_new = (0.5 + 0.5 * o) * jnp.tanh(c_new)
-        return (h_new, c_new), (h_new, t, c)
-
-    zeros = jnp.zeros(xw.shape[1:-1] + (hidden,), xw.dtype)
-    # Not unrolled: measured on this CPU, unrolling made compiles 4-13x slower, runs no faster.
-    (_, c_last), (hs, ts, cs_prev) = jax.lax.scan(step, (zeros, zeros), xw)
-    return hs, (ts, cs_prev, c_last, hs, w_hh)
-
-
-@jax.custom_vjp
-def lstm_scan(xw: Float[Array, "T N 4H"], w_hh: Float[Array, "H 4H"]) -> Float[Array, "T N H"]:
-    """One-layer LSTM over time-major projected inputs xw = x @ w_ih + b_ih + b_hh, zero initial
-    state; all hidden states. Hand-written backward (back-propagation through time): the
-    recurrent step does one [N, 4H] x [4H, H] matmul and the weight gradient is one matmul over
-    all steps afterwards (measured 1.3-2x faster than differentiating the scan)."""
-    return _forward(xw, w_hh)[0]
-
-
-def _backward(saved, dhs):
-    ts, cs_prev, c_last, hs, w_hh = saved
-    hidden = w_hh.shape[0]
-    cs = jnp.concatenate([cs_prev[1:], c_last[None]], axis=0)
-    hs_prev = jnp.concatenate([jnp.zeros_like(hs[:1]), hs[:-1]], axis=0)
-
-    def step(carry, xs):
-        dh_next, dc_next = carry
-        dh_t, t, c_prev, c = xs
-        ti, tf, tg, to = (t[..., k * hidden : (k + 1) * hidden] for k in range(4))
-        i, f, o = 0.5 + 0.5 * ti, 0.5 + 0.5 * tf, 0.5 + 0.5 * to
-        dh = dh_next + dh_t
-        tc = jnp.tanh(c)
-        dc = dc_next + dh * o * (1.0 - tc * tc)
-        dgates = jnp.concatenate(
-            [dc * tg * i * (1.0 - i), dc * c_prev * f * (1.0 - f), dc * i * (1.0 - tg * tg), dh * tc * o * (1.0 - o)],
-            axis=-1,
-        )
-        return (dgates @ w_hh.T, dc * f), dgates
-
-    zeros = jnp.zeros_like(dhs[0])
-    _, dgates = jax.lax.scan(step, (zeros, zeros), (dhs, ts, cs_prev, cs), reverse=True)
-    return dgates, jnp.einsum("tnh,tng->hg", hs_prev, dgates)
-
-
-lstm_scan.defvjp(_forward, _backward)
+    def repeated(self, x: Float[Array, "N n_in"], steps: int) -> Float[Array, "T N H"]:
+        """Hidden states of `steps` steps whose input is `x` at every step (the decoder's case:
+        the input is projected once, and its gradient is the sum over steps)."""
+        return lstm_repeat(steps, x, *self._weights())
 
 
 class FullWidthConv(nnx.Module):

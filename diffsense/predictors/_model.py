@@ -93,8 +93,7 @@ class CSLSTM(nnx.Module):
         """Final LSTM hidden state of each history (time on axis -2)."""
         lead = xy.shape[:-2]
         seq = jnp.moveaxis(xy.reshape((-1, HIST_LEN, 2)), 1, 0)  # [T, N, 2]
-        xw = self.enc_lstm.project(leaky_relu(self.ip_emb(seq)))
-        return self.enc_lstm.final(xw).reshape(lead + (ENC_SIZE,))
+        return self.enc_lstm.final(leaky_relu(self.ip_emb(seq))).reshape(lead + (ENC_SIZE,))
 
     def social(self, grid: Float[Array, "B 39 64"]) -> Float[Array, "B 80"]:
         """Convolutional social pooling of the filled grid (flattened channel-major like torch)."""
@@ -115,8 +114,7 @@ class CSLSTM(nnx.Module):
     # -- decoders -------------------------------------------------------------------------------
     def decode_raw(self, enc: Float[Array, "N D"]) -> Float[Array, "N 25 5"]:
         """Trajectory before the output activation; `enc` includes any manoeuvre one-hots."""
-        xw = self.dec_lstm.project(enc)  # the input is the same at every step: project once
-        hs = self.dec_lstm.scan(jnp.broadcast_to(xw, (FUT_LEN,) + xw.shape))
+        hs = self.dec_lstm.repeated(enc, FUT_LEN)
         return jnp.moveaxis(self.op(hs), 0, 1)
 
     def maneuver_onehots(self, dtype) -> Float[Array, "6 5"]:
