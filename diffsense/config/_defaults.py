@@ -63,6 +63,8 @@ def load_layers(cls: type[C], shipped: list[str], user: str | Path | None = None
         path = Path(user)
         try:
             text = path.read_text()
+        except FileNotFoundError:
+            raise InputError(f"config file not found: {path}") from None
         except (OSError, UnicodeDecodeError) as e:
             raise InputError(f"cannot read config {path}: {e.strerror if isinstance(e, OSError) else e}") from None
         data, where = merge(data, parse_toml(text, str(path))), str(path)

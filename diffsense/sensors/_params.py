@@ -181,14 +181,14 @@ class RadarConfig:
     range_resolution_m: float
     azimuth_resolution_deg: float
     gain_follows_hfov: bool = True
-    gain_hfov_deg: float = 30.0
+    gain_beam_deg: float = 30.0
 
     def __post_init__(self):
         check_params(self.params)
         for name in ("frequency_ghz", "noise_bandwidth_hz", "antenna_efficiency"):
             _require(getattr(self, name) > 0, f"radar {name} must be > 0")
         _require(self.antenna_efficiency <= 1, "radar antenna_efficiency must be <= 1")
-        _require(0 < self.gain_hfov_deg <= 360, "radar gain_hfov_deg must be in (0, 360]")
+        _require(0 < self.gain_beam_deg <= 360, "radar gain_beam_deg must be in (0, 360]")
         for name in ("system_loss_db", "atmospheric_loss_db_per_km", "occlusion_loss_db",
                      "range_accuracy_m", "azimuth_accuracy_deg", "range_resolution_m",
                      "azimuth_resolution_deg"):

@@ -33,8 +33,8 @@ _SNR_CLIP_DB = 100.0  # bounds 10^(SNR/20) in the noise term (float32-safe)
 
 def radar_gain_dbi(params: RadarParams, config: RadarConfig) -> Float[Array, ""]:
     """One-way antenna gain of a beam of HFOV x VFOV [dBi]; with `gain_follows_hfov` off (the
-    paper profile) the beam is `gain_hfov_deg` wide whatever the swept HFOV."""
-    hfov_deg = params.hfov_deg if config.gain_follows_hfov else config.gain_hfov_deg
+    paper profile) the beam is `gain_beam_deg` wide whatever the swept HFOV."""
+    hfov_deg = params.hfov_deg if config.gain_follows_hfov else config.gain_beam_deg
     beam_sr = jnp.deg2rad(hfov_deg) * jnp.deg2rad(params.vfov_deg)
     return 10.0 * jnp.log10(config.antenna_efficiency * 4.0 * math.pi / beam_sr)
 
