@@ -12,9 +12,10 @@ mutant only the selected tests that reach the mutated function. The summary (cou
 every surviving mutant's diff) is printed and written to `<workdir>/report.md`; review each
 survivor there: kill it with a test or list it in docs/mutation.md as equivalent, with why.
 
-mutmut's fork server starts every mutant's pytest from a fresh import (`forkserver_warmup =
-none`): a process that had already run the tests would carry jax's compiled functions, traced
-without the mutation, into every mutant.
+mutmut's fork server imports only third-party packages (tools/mutation_preload.txt) before it
+forks a process per mutant, which imports diffsense and the tests afresh: a process that had
+already run the tests would carry jax's compiled functions, traced without the mutation, into
+every mutant.
 """
 
 from __future__ import annotations
