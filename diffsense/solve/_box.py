@@ -1,0 +1,289 @@
+"""The box solve: argmin of J = E + cost_weight * cost over many parameters with bounds.
+
+Strategy:
+1. a coarse space-filling sample of the box (a Halton sequence, randomly shifted by `seed`) is
+   evaluated on the HARD objective; its best points are the starts;
+2. from each start, optimistix BFGS minimises the SOFT J at each temperature of the
+   continuation schedule, largest first, each level warm-started from the one before;
+3. each start's answer is checked on the HARD objective, and the answer is the best hard J of
+   all answers and sample points (so it is never worse than the sample's best);
+4. at the answer: E_hard, E_soft, cost, the soft gradient per parameter at the last
+   temperature, and which parameters lie on a bound.
+
+The box is searched through MINUIT's sine transform: each parameter is
+x = lo + (hi - lo) (1 + sin t) / 2 with t unconstrained, so every point a solver asks for lies
+in [lo, hi] (clipped against rounding), and a minimum on a bound is an ordinary stationary
+point in t (J changes quadratically in t there), which BFGS reaches instead of running off to
+infinity. A parameter within `bound_tol` of a bound (relative to its box) is put on it and
+flagged. BFGS starts from the identity inverse Hessian, so J is scaled per run (`_Runner.run`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from diffsense.errors import InputError
+from diffsense.solve._box_fns import BoxFunctions, Event
+
+
+@dataclasses.dataclass(frozen=True)
+class BoxConfig:
+    """Settings of `box_solve`.
+
+    Attributes:
+        samples: size of the coarse hard sample (0: 2 d + 2 for d parameters).
+        starts: BFGS runs, from the best sample points [-].
+        tau_schedule: temperature multipliers of the continuation, largest first.
+        max_steps: BFGS steps per start and temperature (each one soft evaluation) [-].
+        max_soft: soft evaluations of the whole solve at most [-].
+        rtol, atol: BFGS's Cauchy termination on t [rad] and on the scaled J.
+        first_step_rad: the first BFGS step's largest move in t [rad].
+        bound_tol: distance to a bound, relative to the box, within which a parameter is put on it.
+        cost_weight: lambda in J = E + lambda * cost [m per currency unit].
+        seed: shifts the Halton sample.
+    """
+
+    samples: int = 0
+    starts: int = 2
+    tau_schedule: tuple[float, ...] = (4.0, 2.0, 1.0)
+    max_steps: int = 30
+    max_soft: int = 400
+    rtol: float = 1e-6
+    atol: float = 1e-6
+    first_step_rad: float = 0.5
+    bound_tol: float = 1e-6
+    cost_weight: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self):
+        taus = tuple(float(t) for t in self.tau_schedule)
+        if not taus or not all(math.isfinite(t) and t > 0 for t in taus) or list(taus) != sorted(taus, reverse=True):
+            raise InputError(f"tau_schedule {taus} must be positive numbers, largest first")
+        for name in ("samples", "starts", "max_steps", "max_soft"):
+            if getattr(self, name) < 0:
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not (self.cost_weight >= 0 and math.isfinite(self.cost_weight)):
+            raise InputError(f"cost_weight must be a finite number >= 0, got {self.cost_weight}")
+
+
+@dataclasses.dataclass(frozen=True)
+class StartResult:
+    """One BFGS run: where it began and ended, J there (soft at the last level, hard), steps per level."""
+
+    x0: dict[str, float]
+    x: dict[str, float]
+    J_soft: float
+    J_hard: float
+    steps: tuple[int, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class BoxResult:
+    """The answer of `box_solve`.
+
+    Attributes:
+        x_star: r*, {name: value} in each parameter's unit.
+        J_star: E_hard + cost_weight * cost at r* (what the answer was chosen on).
+        E_hard, E_soft: E [m] at r*, hard and soft (at the last temperature).
+        cost: cost(r*) [currency] (0 without a cost model).
+        gradient: dJ_soft/dx at r* per parameter [m per unit] (at the last temperature).
+        gradient_E: dE_soft/dx at r* per parameter [m per unit].
+        on_bound: per parameter "lower", "upper" or "" (interior).
+        source: "start k" (the k-th BFGS run's answer) or "sample" (a sample point was best).
+        starts: every BFGS run.
+        counts: distinct soft (value and gradient) and hard evaluations the solve made.
+        history: every evaluation in order (`BoxFunctions.history` since the solve began).
+    """
+
+    names: tuple[str, ...]
+    bounds: dict[str, tuple[float, float]]
+    x_star: dict[str, float]
+    J_star: float
+    E_hard: float
+    E_soft: float
+    cost: float
+    gradient: dict[str, float]
+    gradient_E: dict[str, float]
+    on_bound: dict[str, str]
+    source: str
+    starts: tuple[StartResult, ...]
+    counts: dict[str, int]
+    history: tuple[Event, ...]
+    tau_schedule: tuple[float, ...]
+    cost_weight: float
+
+
+def halton(n: int, d: int, seed: int = 0) -> np.ndarray:
+    """n points of the d-dimensional Halton sequence in (0, 1)^d, shifted modulo 1 by a uniform
+    draw from `seed` (Cranley-Patterson rotation), [n, d]."""
+    primes = [p for p in range(2, 1000) if all(p % q for q in range(2, int(p**0.5) + 1))][:d]
+    out = np.empty((n, d))
+    for j, base in enumerate(primes):
+        for i in range(n):
+            f, k, x = 1.0, i + 1, 0.0
+            while k > 0:
+                f /= base
+                x += f * (k % base)
+                k //= base
+            out[i, j] = x
+    shift = np.random.default_rng(seed).uniform(size=d)
+    return np.clip((out + shift) % 1.0, 1e-9, 1.0 - 1e-9)
+
+
+class _Box:
+    """The sine transform between t and x, and the snap to bounds."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, bound_tol: float):
+        self.lo, self.hi, self.width, self.tol = lo, hi, hi - lo, bound_tol
+
+    def x(self, t) -> np.ndarray:
+        return np.clip(self.lo + self.width * 0.5 * (1.0 + np.sin(t)), self.lo, self.hi)
+
+    def t(self, x) -> np.ndarray:
+        return np.arcsin(np.clip(2.0 * (np.asarray(x) - self.lo) / self.width - 1.0, -1.0, 1.0))
+
+    def snap(self, x) -> tuple[np.ndarray, list[str]]:
+        u = (np.asarray(x) - self.lo) / self.width
+        flags = ["lower" if v <= self.tol else "upper" if v >= 1.0 - self.tol else "" for v in u]
+        x = np.where(u <= self.tol, self.lo, np.where(u >= 1.0 - self.tol, self.hi, x))
+        return x, flags
+
+
+class _Runner:
+    """BFGS on the soft J in t, one optimistix step per Python iteration (so the soft budget is
+    checked between steps), compiled once per solve; J reaches it through a host callback."""
+
+    def __init__(self, fns: BoxFunctions, box: _Box, weight: float, config: BoxConfig):
+        d = len(fns.names)
+        vec, scalar = jax.ShapeDtypeStruct((d,), jnp.float64), jax.ShapeDtypeStruct((), jnp.float64)
+
+        def host(t, tau, scale):
+            t = np.asarray(t, np.float64)
+            j, g, _ = fns.j_soft(box.x(t), float(tau), weight)
+            dxdt = box.width * 0.5 * np.cos(t)
+            return np.float64(j * scale), np.asarray(g * dxdt * scale, np.float64)
+
+        def call(t, tau, scale):
+            return jax.pure_callback(host, (scalar, vec), t, tau, scale)
+
+        @jax.custom_jvp
+        def j(t, tau, scale):
+            return call(t, tau, scale)[0]
+
+        @j.defjvp
+        def _jvp(primals, tangents):
+            v, g = call(*primals)
+            return v, jnp.dot(g, tangents[0])
+
+        def fn(t, args):
+            return j(t, *args), None
+
+        tags = frozenset()
+        # The solver is an argument (its tolerances arrays), so one program serves every level.
+        self._init = eqx.filter_jit(lambda solver, t, args: solver.init(fn, t, args, {}, scalar, None, tags))
+        self._step = eqx.filter_jit(lambda solver, t, args, state: solver.step(fn, t, args, {}, state, tags)[:2])
+        self.fns, self.box, self.weight, self.config = fns, box, weight, config
+
+    def run(self, t0: np.ndarray, tau: float, budget: int) -> tuple[np.ndarray, int]:
+        """BFGS from t0 at temperature tau: (t at the end, steps taken).
+
+        J is divided by |J(t0)| (a relative objective: steps do not depend on its units), and
+        further if that would make the first step move any t by more than `first_step_rad`.
+        Tolerances are scaled by tau / tau_last, as the continuation only needs the last level exact.
+        """
+        j, g, _ = self.fns.j_soft(self.box.x(t0), tau, self.weight)
+        g_max = float(np.max(np.abs(g * self.box.width * 0.5 * np.cos(t0))))
+        scale = 1.0 / max(abs(j), 1e-12)
+        if g_max * scale > self.config.first_step_rad:
+            scale = self.config.first_step_rad / g_max
+        loose = tau / float(self.config.tau_schedule[-1])
+        solver = optx.BFGS(rtol=jnp.asarray(self.config.rtol * loose), atol=jnp.asarray(self.config.atol * loose))
+        args = (jnp.asarray(tau, jnp.float64), jnp.asarray(scale, jnp.float64))
+        t = jnp.asarray(t0, jnp.float64)
+        state = self._init(solver, t, args)
+        steps = 0
+        while steps < self.config.max_steps and self.fns.counts["soft"] < budget:
+            t, state = self._step(solver, t, args, state)
+            steps += 1
+            # optimistix tests convergence on accepted steps only; near a minimum J's decrease
+            # falls below rounding, Armijo rejects, and the steps shrink around the answer for
+            # ever. So stop too when the next trial point moves t by less than the tolerance.
+            move = float(jnp.max(jnp.abs(state.y_eval - t)))
+            if bool(state.terminate) or move <= self.config.atol * loose + self.config.rtol * loose * float(jnp.max(jnp.abs(t))):
+                break
+        return np.asarray(t, np.float64), steps
+
+
+def _check_bounds(names: Sequence[str], bounds: Any) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(bounds, dict):
+        bounds = [bounds[n] for n in names]
+    pairs = [tuple(float(v) for v in b) for b in bounds]
+    if len(pairs) != len(names) or any(len(p) != 2 for p in pairs):
+        raise InputError(f"need (lo, hi) for each of {len(names)} parameters, got {len(pairs)}")
+    for n, (lo, hi) in zip(names, pairs):
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise InputError(f"bounds of {n} must be finite with lo < hi, got {lo:g} {hi:g}")
+    return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+
+def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
+              extra_starts: Sequence[Sequence[float]] = ()) -> BoxResult:
+    """argmin of E + cost_weight * cost over the box `bounds` ({name: (lo, hi)} or a list in the
+    order of `fns.names`); `extra_starts` are points added to the coarse sample (e.g. defaults)."""
+    if not jax.config.jax_enable_x64:  # the solver's t and x are float64
+        jax.config.update("jax_enable_x64", True)
+    names, (lo, hi) = fns.names, _check_bounds(fns.names, bounds)
+    d, lam, first, counts0 = len(names), config.cost_weight, len(fns.history), dict(fns.counts)
+    budget = counts0["soft"] + config.max_soft
+    box = _Box(lo, hi, config.bound_tol)
+    points = [box.x(box.t(np.clip(np.asarray(p, np.float64), lo, hi))) for p in extra_starts]
+    points += list(lo + (hi - lo) * halton(config.samples or 2 * d + 2, d, config.seed))
+    sample = sorted(((fns.j_hard(p, lam)[0], i) for i, p in enumerate(points)))
+    runner = _Runner(fns, box, lam, config) if config.starts else None
+    starts: list[StartResult] = []
+    candidates = [(sample[0][0], "sample", points[sample[0][1]])]
+    for k, (_, i) in enumerate(sample[: config.starts]):
+        t, steps = box.t(points[i]), []
+        for tau in config.tau_schedule:
+            t, n = runner.run(t, float(tau), budget) if fns.counts["soft"] < budget else (t, 0)
+            steps.append(n)
+        x, _ = box.snap(box.x(t))
+        j_soft = fns.j_soft(x, float(config.tau_schedule[-1]), lam)[0]
+        j_hard = fns.j_hard(x, lam)[0]
+        starts.append(StartResult(_named(names, points[i]), _named(names, x), j_soft, j_hard, tuple(steps)))
+        candidates.append((j_hard, f"start {k}", x))
+    j_star, source, x_star = min(candidates, key=lambda c: c[0])
+    x_star, flags = box.snap(x_star)
+    j_soft, grad, e_soft = fns.j_soft(x_star, float(config.tau_schedule[-1]), lam)
+    _, e_hard, cost = fns.j_hard(x_star, lam)
+    e2, g2 = fns.e2_soft(x_star, float(config.tau_schedule[-1]))
+    grad_e = g2 / (2.0 * e_soft) if e_soft > 0 else np.zeros(d)
+    return BoxResult(
+        names=names, bounds={n: (float(a), float(b)) for n, a, b in zip(names, lo, hi)},
+        x_star=_named(names, x_star), J_star=float(j_star), E_hard=e_hard, E_soft=e_soft, cost=cost,
+        gradient=_named(names, grad), gradient_E=_named(names, grad_e), on_bound=dict(zip(names, flags)),
+        source=source, starts=tuple(starts), counts={k: fns.counts[k] - counts0[k] for k in counts0}, history=tuple(fns.history[first:]),
+        tau_schedule=tuple(float(t) for t in config.tau_schedule), cost_weight=float(lam))
+
+
+def _named(names: Sequence[str], x) -> dict[str, float]:
+    return {n: float(v) for n, v in zip(names, np.asarray(x, np.float64))}
+
+
+def pareto_sweep(fns: BoxFunctions, bounds: Any, weights: Sequence[float], config: BoxConfig = BoxConfig()
+                 ) -> tuple[tuple[BoxResult, ...], tuple[bool, ...]]:
+    """One box solve per cost weight (the evaluations are memoised in `fns`, so the coarse
+    sample is paid once), and which answers are Pareto-optimal in (E_hard, cost)."""
+    results = tuple(box_solve(fns, bounds, dataclasses.replace(config, cost_weight=float(w))) for w in weights)
+    pts = [(r.E_hard, r.cost) for r in results]
+    front = tuple(not any(q[0] <= p[0] and q[1] <= p[1] and q != p for q in pts) for p in pts)
+    return results, front
