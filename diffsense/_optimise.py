@@ -27,6 +27,7 @@ from diffsense._timing import CompileClock
 from diffsense.errors import InputError
 from diffsense.metrics import Objective, make_objective, simulate_scenes
 from diffsense.predictors import load_predictor
+from diffsense.sensors import Weather
 from diffsense.scene import ROLE_NAMES
 from diffsense.solve import Evaluator, basin_check, default_steps, dense_grid_search, hard_grid_solve, solve
 from diffsense.tracks import prediction_frames
@@ -56,14 +57,15 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     sensor = problem.make_sensor()
     predictor = _predictor(problem) if predictor is None else predictor
     scene_key, noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))
-    scenes, index, names = simulate_scenes(
+    scenes, index, names, weather = simulate_scenes(
         problem.scenarios, problem.variants, scene_key, spec=predictor.spec, sensors=[sensor],
         stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
         dtype=dtype)
     frames = prediction_frames(scenes.num_frames, problem.prediction_stride_frames, predictor.spec, scenes.dt_s)
     return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
                           fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names,
-                          question=problem.objective, miss_penalty_m2=problem.miss_penalty_m2)
+                          question=problem.objective, miss_penalty_m2=problem.miss_penalty_m2,
+                          weather=weather if problem.weather is None else Weather(**problem.weather))
 
 
 def _config(problem: Problem) -> dict[str, Any]:

@@ -49,6 +49,9 @@ class Problem:
         prediction_stride_frames: one prediction instant every this many scene frames [-].
         background_vehicles: if > 0, replaces every scenario's count of far background vehicles.
         float64: compute E(r) in float64 (enables JAX's x64 mode when needed).
+        weather: the scenes' weather, {"rain_mm_h": R, "fog_visibility_m": V} (either may be left
+            out: no rain, no fog), for every scenario; None: each scenario's own (its TOML's
+            `[weather]`, clear for the shipped ones).
         objective: the question E answers: "eq12" (the paper's, every instant) or "tracked"
             (the error where the target has a track, plus `miss_penalty_m2` per missed share).
         miss_penalty_m2: the price of an instant without a track under "tracked" [m^2].
@@ -71,6 +74,7 @@ class Problem:
     prediction_stride_frames: int = 4
     background_vehicles: int = 0
     float64: bool = True
+    weather: Mapping[str, float] | None = None
     objective: str = "eq12"
     miss_penalty_m2: float = 100.0
     steps: Sequence[float] | None = None
@@ -98,6 +102,9 @@ class Problem:
         _check_int("prediction_stride_frames", self.prediction_stride_frames, 1, 1000)
         _check_int("background_vehicles", self.background_vehicles, 0, 10_000)
         _check_int("extra_curve_points", self.extra_curve_points, 0, 1000)
+        set_("weather", None if self.weather is None else _weather(self.weather))
+        if self.profile == "paper" and self.weather is not None and self.weather != _weather(None):
+            raise InputError("the paper profile is the paper's clear-weather design: use the physical profile for weather")
         if self.objective not in QUESTIONS:
             raise InputError(f"unknown objective {self.objective!r} (known: {', '.join(QUESTIONS)})")
         set_("miss_penalty_m2", _finite(self.miss_penalty_m2, "miss_penalty_m2"))
@@ -135,6 +142,26 @@ class Problem:
         """A problem from a TOML in the layout of `configs/optimise/default.toml` (None: that
         file). Keys the file leaves out keep the shipped defaults; `overrides` replace fields."""
         return cls(**problem_fields(load_settings(path)) | overrides)
+
+
+WEATHER_DOMAINS = {"rain_mm_h": (0.0, 500.0), "fog_visibility_m": (1.0, math.inf)}
+
+
+def _weather(weather: Mapping[str, Any] | None) -> dict[str, float]:
+    """The weather as {"rain_mm_h", "fog_visibility_m"}, each checked against its domain."""
+    out = {"rain_mm_h": 0.0, "fog_visibility_m": math.inf}
+    for name, value in (weather or {}).items():
+        if name not in WEATHER_DOMAINS:
+            raise InputError(f"unknown weather {name!r} (known: {', '.join(WEATHER_DOMAINS)})")
+        lo, hi = WEATHER_DOMAINS[name]
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise InputError(f"weather {name} must be a number, got {value!r}") from None
+        if math.isnan(v) or not lo <= v <= hi or (math.isinf(v) and name != "fog_visibility_m"):
+            raise InputError(f"weather {name} = {value!r} is outside [{lo:g}, {hi:g}]")
+        out[name] = v
+    return out
 
 
 def _check_int(name: str, value: Any, lo: int, hi: int) -> None:

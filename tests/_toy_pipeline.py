@@ -54,7 +54,7 @@ class ToySensor(Sensor):
     def mount_x_m(self) -> float:
         return 0.0
 
-    def _detect(self, scene: Scene, r, noise, mode, temperature) -> Detections:
+    def _detect(self, scene: Scene, r, noise, mode, temperature, weather) -> Detections:
         dist = jnp.abs(scene.x_m - scene.x_m[..., :1])
         margin = r["range_m"] - dist
         if mode == "soft":

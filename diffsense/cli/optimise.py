@@ -54,6 +54,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="tracked: price of an instant without a track [m^2] (default 100: a 10 m RMS error)")
     p.add_argument("--tau", type=float, help="temperature multiplier of the final continuation level")
     p.add_argument("--seed", type=int, help="seed of scenes, noise and Monte-Carlo draws")
+    p.add_argument("--rain-mm-h", type=float, metavar="R", help="rain rate [mm/h] (radar attenuation, camera visibility)")
+    p.add_argument("--fog-visibility-m", type=float, metavar="V", help="fog visibility [m] (camera contrast range)")
     p.add_argument("--dense-check", type=float, metavar="STEP",
                    help="also evaluate E_hard every STEP (parameter units, e.g. 0.5 deg) over the "
                    "interval and report whether r* lies in the basin of the best dense point")
@@ -109,6 +111,10 @@ def problems(args: argparse.Namespace) -> list:
         if args.steps:
             fields["steps"] = _number_list(args.steps, "--steps")
         fields["dense_check"] = args.dense_check
+        weather = {k: v for k, v in (("rain_mm_h", args.rain_mm_h), ("fog_visibility_m", args.fog_visibility_m))
+                   if v is not None}
+        if weather:
+            fields["weather"] = weather
         problem = Problem(**fields)
         (lo, hi), = problem.params.values()
         if problem.steps is not None:

@@ -22,7 +22,7 @@ from diffsense.metrics._objective import QUESTIONS, Objective, ObjectiveData
 from diffsense.metrics._sharding import shard_leading_axis
 from diffsense.predictors import InputSpec
 from diffsense.scene import Scene, load_scenario, relevant_vehicles, simulate_scenario
-from diffsense.sensors import Sensor
+from diffsense.sensors import CLEAR, Sensor, Weather
 from diffsense.tracks import FillPolicy, build_inputs, flatten_instants, ground_truth_detections, prediction_frames, true_future
 
 PAPER_SCENARIOS: tuple[str, ...] = ("sc01", "sc02", "sc03", "sc04", "sc05", "sc06")
@@ -59,10 +59,11 @@ def _pad_vehicles(scene: Scene, width: int) -> Scene:
 def simulate_scenes(
     scenarios: Sequence[str], variants: int, key: jax.Array, *, spec: InputSpec, sensors: Sequence[Sensor],
     stride_frames: int = 4, background_vehicles: int = 0, dtype=jnp.float64,
-) -> tuple[Scene, np.ndarray, tuple[str, ...]]:
+) -> tuple[Scene, np.ndarray, tuple[str, ...], Weather]:
     """All variants of all scenarios, reduced to their relevant vehicles: Scene [N, T, V],
-    the scenario index of each variant [N], and the scenario names."""
-    scenes, names = [], []
+    the scenario index of each variant [N], the scenario names, and each variant's weather
+    (the scenario TOML's `[weather]`; leaves [N])."""
+    scenes, names, rain, fog = [], [], [], []
     for i, name in enumerate(scenarios):
         scenario = load_scenario(name)
         if background_vehicles:
@@ -71,12 +72,15 @@ def simulate_scenes(
         frames = prediction_frames(sim.num_frames, stride_frames, spec, sim.dt_s)
         scenes.append(relevant_vehicles(sim, frames, **relevance_reach(spec, sensors)))
         names.append(scenario.name)
+        rain.append(scenario.weather.rain_mm_h)
+        fog.append(scenario.weather.fog_visibility_m or np.inf)
     lengths = {s.num_frames for s in scenes}
     if len(lengths) != 1:
         raise InputError(f"scenarios must have the same duration to be pooled, got {sorted(lengths)} frames")
     width = max(s.num_vehicles for s in scenes)
     batch = jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(s, width) for s in scenes])
-    return batch, np.repeat(np.arange(len(scenes)), variants), tuple(names)
+    weather = Weather(rain_mm_h=np.repeat(np.asarray(rain), variants), fog_visibility_m=np.repeat(np.asarray(fog), variants))
+    return batch, np.repeat(np.arange(len(scenes)), variants), tuple(names), weather
 
 
 def make_objective(
@@ -94,12 +98,13 @@ def make_objective(
     shard: bool = True,
     question: str = "eq12",
     miss_penalty_m2: float = 100.0,
+    weather: Weather = CLEAR,
 ) -> Objective:
     """E(r) of `sensor` and `predictor` over the scene variants `scenes` [N, T, V].
 
     `key` fixes every random draw (measurement noise, Monte-Carlo uniforms): same key, same E(r).
     `question` is "eq12" or "tracked", `miss_penalty_m2` the price of an instant without a track
-    in the latter (see `Objective`).
+    in the latter (see `Objective`). `weather`: scalars for every variant, or leaves [N].
     Ground-truth predictions are computed here, once. With several JAX devices the variants
     are sharded over them (padded with zero-weight copies to a multiple of the device count);
     with one device nothing changes.
@@ -133,6 +138,9 @@ def make_objective(
                          true_fut=fut.astype(gt_pred.dtype), noise_key=noise_keys, mc_uniform=uniform)
     if scenario_names is None:
         scenario_names = tuple(f"scenario{i}" for i in range(int(jnp.max(scenario)) + 1))
-    return Objective(data=data, sensor=sensor, predictor=predictor, names=tuple(names),
+    weather = jax.tree.map(lambda v: jnp.broadcast_to(jnp.asarray(v, dtype), (n,)), weather)
+    if shard:
+        weather = shard_leading_axis(weather)
+    return Objective(data=data, sensor=sensor, predictor=predictor, weather=weather, names=tuple(names),
                      frames=tuple(int(f) for f in frames), fill=fill, estimator=estimator,
                      scenario_names=tuple(scenario_names), question=question, miss_penalty_m2=float(miss_penalty_m2))

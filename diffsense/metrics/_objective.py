@@ -43,7 +43,7 @@ from diffsense.metrics._coverage import coverage_classes, p_tracked, target_wind
 from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli
 from diffsense.predictors import InputSpec
 from diffsense.scene import Scene
-from diffsense.sensors import Sensor
+from diffsense.sensors import Sensor, Weather
 from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import FillPolicy, PredictorInputs, build_inputs, flatten_instants
 
@@ -126,12 +126,15 @@ class Objective(eqx.Module):
     `E(r, mode="hard")` (0/1 detections: the reference quality of r). r is a dict of named
     parameters of the sensor (`{"hfov_deg": 45.0}`); parameters it leaves out keep the
     sensor's defaults. `names` are the problem's free parameters (what a solver varies).
+    `weather` (leaves [N], one per variant, like the data) is the scenes' ODD: E is
+    differentiable in it.
     Build it with `diffsense.objective(problem)` or `make_objective`.
     """
 
     data: ObjectiveData
     sensor: Sensor
     predictor: Any
+    weather: Weather
     names: tuple[str, ...] = eqx.field(static=True)
     frames: tuple[int, ...] = eqx.field(static=True)
     fill: FillPolicy = eqx.field(static=True)
@@ -177,8 +180,9 @@ class Objective(eqx.Module):
     def detections(self, r: Params, mode: Mode = "hard", tau: float | Array = 1.0) -> Detections:
         """The sensor's detections of every variant at r: [N, T, V]."""
         params, tau = self._params(r), jnp.asarray(tau).astype(self.dtype)
-        return jax.vmap(lambda s, k: self.sensor.detect(s, params, k, mode=mode, temperature=tau))(
-            self.data.scenes, self.data.noise_key)
+        weather = jax.tree.map(lambda v: jnp.asarray(v).astype(self.dtype), self.weather)
+        return jax.vmap(lambda s, k, w: self.sensor.detect(s, params, k, mode=mode, temperature=tau, weather=w))(
+            self.data.scenes, self.data.noise_key, weather)
 
     def _predict(self, det: Detections) -> Float[Array, "N I F 2"]:
         frames = jnp.asarray(self.frames)

@@ -116,6 +116,21 @@ class BackgroundSpec:
 
 
 @dataclasses.dataclass(frozen=True)
+class WeatherSpec:
+    """The scenario's weather (its ODD): `rain_mm_h` [mm/h], 0 for none; `fog_visibility_m` [m],
+    0 for no fog (TOML has no "none"). The sensors model its effect (diffsense.sensors.Weather)."""
+
+    rain_mm_h: float = 0.0
+    fog_visibility_m: float = 0.0
+
+    def __post_init__(self):
+        if not 0.0 <= self.rain_mm_h <= 500.0:
+            raise InputError(f"weather.rain_mm_h must be in [0, 500], got {self.rain_mm_h}")
+        if not (self.fog_visibility_m == 0.0 or self.fog_visibility_m >= 1.0):
+            raise InputError(f"weather.fog_visibility_m must be 0 (no fog) or >= 1 m, got {self.fog_visibility_m}")
+
+
+@dataclasses.dataclass(frozen=True)
 class ScenarioConfig:
     """One of the paper's lane-change scenarios.
 
@@ -141,6 +156,7 @@ class ScenarioConfig:
     description: str = ""
     duration_s: float = 20.0
     background: BackgroundSpec = BackgroundSpec()
+    weather: WeatherSpec = WeatherSpec()
 
     def __post_init__(self):
         step = -1 if self.direction == "right" else 1  # lane 0 is the rightmost

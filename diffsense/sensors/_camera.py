@@ -6,7 +6,8 @@ in the image (k times its angular width) and at least `min_visible_fraction` of 
 interval is not covered by nearer vehicles:
 p = gate(FOV) gate(range) gate(width_px - min) gate(visible - 0.6).
 Measurements: depth along the ray with sigma_Z = Z^2 disparity_error / (k baseline) and bearing
-with sigma = bearing_error_px / k.
+with sigma = bearing_error_px / k. Fog and rain (`Weather`) cap the range at Koschmieder's
+contrast range.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from diffsense.sensors._gates import Mode
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensors._params import CameraConfig, CameraParams
+from diffsense.sensors._weather import CLEAR, Weather
 
 
 def camera_px_per_rad(params: CameraParams) -> Float[Array, ""]:
@@ -45,7 +47,7 @@ def camera_depth_sigma_m(
 
 
 def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mode: Mode,
-                  temperature):
+                  temperature, weather: Weather = CLEAR):
     range_m, azimuth_rad = polar(tracks, config.mount_x_m)
     tau = config.temperature
     half, hidden = vehicle_occlusion(tracks, range_m, azimuth_rad, config.mount_x_m, mode,
@@ -53,7 +55,9 @@ def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mo
     k = camera_px_per_rad(params)
     gates = (
         (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
-        (params.range_m - range_m, tau.range_m * temperature),
+        # Fog and rain cap the range at Koschmieder's contrast range (+inf in clear weather, so
+        # the minimum is then the range itself, bit for bit).
+        (jnp.minimum(params.range_m, weather.camera_range_m(range_m.dtype)) - range_m, tau.range_m * temperature),
         (k * 2.0 * half - config.min_width_px, tau.width_px * temperature),
         ((1.0 - hidden) - config.min_visible_fraction, tau.visible * temperature),
     )
@@ -64,18 +68,18 @@ def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mo
 
 def camera_p_detect(
     scene: Scene, params: CameraParams, config: CameraConfig, *, mode: Mode = "soft",
-    temperature: float | Float[Array, ""] = 1.0,
+    temperature: float | Float[Array, ""] = 1.0, weather: Weather = CLEAR,
 ) -> Float[Array, "T V"]:
     """Camera detection probability [T, V] (soft, differentiable in `params`) or 0/1 (hard).
 
     `temperature` scales every soft-gate temperature of `config` (temperature continuation).
     """
-    return p_detect_of(_camera_terms, scene, params, config, mode, temperature)
+    return p_detect_of(_camera_terms, scene, params, config, mode, temperature, weather)
 
 
 def camera_detect(
     scene: Scene, params: CameraParams, config: CameraConfig, key: KeyOrNoise, *,
-    mode: Mode = "soft", temperature: float | Float[Array, ""] = 1.0,
+    mode: Mode = "soft", temperature: float | Float[Array, ""] = 1.0, weather: Weather = CLEAR,
 ) -> Detections:
     """Camera `Detections` [T, V]: p_detect and noisy stereo depth/bearing in the world."""
-    return detect_of(_camera_terms, scene, params, config, key, mode, temperature)
+    return detect_of(_camera_terms, scene, params, config, key, mode, temperature, weather)

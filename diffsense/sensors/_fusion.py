@@ -46,6 +46,7 @@ from diffsense.sensors._measure import KeyOrNoise
 from diffsense.sensors._member import Covariance, member_view
 from diffsense.sensors._params import ParamSpec
 from diffsense.sensors._sensor import Sensor
+from diffsense.sensors._weather import CLEAR, Weather
 
 MAX_MEMBERS = 6
 # log p of p = 0 (and log(1 - p) of p = 1): exp() of it is 0 in any float type, and differences
@@ -147,15 +148,16 @@ class Suite(Sensor):
 
     def detect_with_covariance(self, scene: Scene, r: dict[str, Any] | None = None,
                                noise: KeyOrNoise | None = None, *, mode: Mode = "soft",
-                               temperature: Float[ArrayLike, ""] = 1.0) -> tuple[Detections, Covariance]:
-        """`detect`, and the fused measurement covariance [T, V] [m^2]."""
+                               temperature: Float[ArrayLike, ""] = 1.0, weather: Weather = CLEAR
+                               ) -> tuple[Detections, Covariance]:
+        """`detect`, and the fused measurement covariance [T, V] [m^2]; every member sees `weather`."""
         full = self.defaults()
         for name, value in (r or {}).items():
             self.spec(name)
             full[name] = value
         if noise is None:
             raise InputError("detect needs a noise key (or the noise draws)")
-        views = [member_view(m, scene, ri, ni, mode, temperature)
+        views = [member_view(m, scene, ri, ni, mode, temperature, weather)
                  for m, ri, ni in zip(self.members, self._split(full), self._noises(noise, scene))]
         det, cov = fuse([v[0] for v in views], [v[1] for v in views])
         # The ego knows itself and padding stays where the scene put it: the members agree on
@@ -166,5 +168,5 @@ class Suite(Sensor):
         return det, cov
 
     def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode,
-                temperature) -> Detections:
-        return self.detect_with_covariance(scene, r, noise, mode=mode, temperature=temperature)[0]
+                temperature, weather: Weather = CLEAR) -> Detections:
+        return self.detect_with_covariance(scene, r, noise, mode=mode, temperature=temperature, weather=weather)[0]

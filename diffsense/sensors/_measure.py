@@ -15,6 +15,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from diffsense.errors import InputError
 from diffsense.scene import EGO_INDEX, Scene
+from diffsense.sensors._weather import CLEAR
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import check_mode, check_temperature, p_from_gates
 from diffsense.sensors._geometry import Tracks, to_world
@@ -65,24 +66,24 @@ def _transposed(a: Float[Array, "V T"]) -> Float[Array, "T V"]:
     return jax.lax.optimization_barrier(a).T
 
 
-def p_detect_of(terms, scene: Scene, params, config, mode: str, temperature) -> Float[Array, "T V"]:
+def p_detect_of(terms, scene: Scene, params, config, mode: str, temperature, weather=CLEAR) -> Float[Array, "T V"]:
     """p_detect of a sensor given its `terms` function (gates, range, azimuth, noise scales)."""
     mode = check_mode(mode)
     check_temperature(temperature)
     tracks = tracks_of(scene)
-    gates = terms(tracks, params, config, mode, temperature)[0]
+    gates = terms(tracks, params, config, mode, temperature, weather)[0]
     return own_and_padding(tracks, p_from_gates(gates, mode))
 
 
 def detect_of(terms, scene: Scene, params, config, key_or_noise: KeyOrNoise, mode: str,
-              temperature) -> Detections:
+              temperature, weather=CLEAR) -> Detections:
     """`Detections` of a sensor given its `terms` function: noisy sensor-frame measurements
     converted to the world with the ego pose."""
     mode = check_mode(mode)
     check_temperature(temperature)
     tracks = tracks_of(scene)
     noise = jax.lax.optimization_barrier(jnp.swapaxes(_noise(key_or_noise, scene), -1, -2))
-    gates, range_m, _, range_sigma, azimuth_sigma = terms(tracks, params, config, mode, temperature)
+    gates, range_m, _, range_sigma, azimuth_sigma = terms(tracks, params, config, mode, temperature, weather)
     x, y = to_world(tracks, config.mount_x_m, range_m + range_sigma * noise[0],
                     azimuth_sigma * noise[1])
     known = (jnp.arange(x.shape[0]) == EGO_INDEX)[:, None] | ~tracks.present

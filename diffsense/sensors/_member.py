@@ -13,7 +13,7 @@ product of the independent range and angle errors (to second order in them: for 
 140 deg, a car 112 m ahead has sigma_Z = 99 m and R^2 alone gives 56 % of the variance). The
 sigmas are those the sensor draws its noise with (`_radar_terms`, `_camera_terms`), computed in
 the same pass as the detections, so fusion costs no second occlusion scan. A custom sensor takes
-part in fusion by defining `measurement_covariance(scene, r, mode, temperature) -> Covariance`.
+part in fusion by defining `measurement_covariance(scene, r, mode, temperature, weather) -> Covariance`.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from diffsense.sensors._measure import KeyOrNoise, _noise, _transposed, own_and_
 from diffsense.sensors._params import CameraParams, RadarParams
 from diffsense.sensors._radar import _radar_terms
 from diffsense.sensors._sensor import Sensor, params_of
+from diffsense.sensors._weather import CLEAR, Weather
 
 # A variance floor [m^2] (1 mm standard deviation, far below any sensor's accuracy): a camera's
 # depth and bearing sigmas vanish at zero range, and fusion inverts the covariance.
@@ -79,7 +80,7 @@ def line_of_sight_covariance(tracks, mount_x_m: float, range_m, along_sigma_m, a
     return Covariance(xx=_transposed(xx), xy=_transposed(xy), yy=_transposed(yy))
 
 
-def _physics_view(terms, scene: Scene, params, config, noise: KeyOrNoise, mode, temperature):
+def _physics_view(terms, scene: Scene, params, config, noise: KeyOrNoise, mode, temperature, weather):
     """`detect_of` of `_measure.py` plus the covariance, from one call of `terms`.
 
     The detections are computed exactly as `detect_of` computes them (tests pin the equality).
@@ -88,7 +89,7 @@ def _physics_view(terms, scene: Scene, params, config, noise: KeyOrNoise, mode, 
     check_temperature(temperature)
     tracks = tracks_of(scene)
     eps = jax.lax.optimization_barrier(jnp.swapaxes(_noise(noise, scene), -1, -2))
-    gates, range_m, _, range_sigma, azimuth_sigma = terms(tracks, params, config, mode, temperature)
+    gates, range_m, _, range_sigma, azimuth_sigma = terms(tracks, params, config, mode, temperature, weather)
     x, y = to_world(tracks, config.mount_x_m, range_m + range_sigma * eps[0], azimuth_sigma * eps[1])
     known = (jnp.arange(x.shape[0]) == EGO_INDEX)[:, None] | ~tracks.present
     x = jnp.where(known, tracks.x_m, x)
@@ -98,19 +99,20 @@ def _physics_view(terms, scene: Scene, params, config, noise: KeyOrNoise, mode, 
     return det, line_of_sight_covariance(tracks, config.mount_x_m, range_m, range_sigma, azimuth_sigma)
 
 
-def member_view(sensor: Sensor, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode, temperature
-                ) -> tuple[Detections, Covariance]:
-    """`sensor`'s Detections [T, V] of `scene` with r complete, and their world covariance."""
+def member_view(sensor: Sensor, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode, temperature,
+                weather: Weather = CLEAR) -> tuple[Detections, Covariance]:
+    """`sensor`'s Detections [T, V] of `scene` in `weather` with r complete, and their world covariance."""
     from diffsense.sensors._suite import Camera, Radar  # _suite imports the sensors' physics
 
     if isinstance(sensor, Radar):
         return _physics_view(_radar_terms, scene, params_of(RadarParams, r), sensor.config, noise, mode,
-                             temperature)
+                             temperature, weather)
     if isinstance(sensor, Camera):
         return _physics_view(_camera_terms, scene, params_of(CameraParams, r), sensor.config, noise, mode,
-                             temperature)
+                             temperature, weather)
     covariance = getattr(sensor, "measurement_covariance", None)
     if covariance is None:
         raise InputError(f"sensor {sensor.kind!r} cannot be fused: it defines no "
-                         "measurement_covariance(scene, r, mode, temperature)")
-    return sensor._detect(scene, r, noise, mode, temperature), covariance(scene, r, mode, temperature)
+                         "measurement_covariance(scene, r, mode, temperature, weather)")
+    return (sensor._detect(scene, r, noise, mode, temperature, weather),
+            covariance(scene, r, mode, temperature, weather))

@@ -8,6 +8,7 @@ gains: doubling it costs 6.02 dB, and each doubling of range costs 12.04 dB (+ a
 
 p = gate(HFOV/2 - |azimuth|) gate(R_max - R) gate(SNR - occlusion loss - threshold); an occluder
 attenuates the SNR by `occlusion_loss_db` per occluded fraction instead of hiding the target.
+Rain (`Weather`) attenuates the echo by its two-way ITU-R P.838-3 loss; fog does not.
 Measurement noise: the Table I accuracy plus the thermal term resolution / sqrt(2 SNR).
 """
 
@@ -24,6 +25,7 @@ from diffsense.sensors._gates import Mode
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensors._params import RadarConfig, RadarParams
+from diffsense.sensors._weather import CLEAR, Weather
 
 _SPEED_OF_LIGHT_MPS = 299_792_458.0
 _BOLTZMANN_DBM_PER_HZ = -174.0  # kT0 at 290 K
@@ -60,14 +62,15 @@ def radar_rcs_dbsm(kind: Int[Array, "V"], config: RadarConfig) -> Float[Array, "
     return table[kind]
 
 
-def _radar_terms(tracks: Tracks, params: RadarParams, config: RadarConfig, mode: Mode, temperature):
+def _radar_terms(tracks: Tracks, params: RadarParams, config: RadarConfig, mode: Mode, temperature,
+                 weather: Weather = CLEAR):
     range_m, azimuth_rad = polar(tracks, config.mount_x_m)
     tau = config.temperature
     _, shadow = vehicle_occlusion(tracks, range_m, azimuth_rad, config.mount_x_m, mode,
                                   tau.near_m * temperature, tau.overlap_deg * temperature)
     rcs = radar_rcs_dbsm(tracks.kind, config).astype(range_m.dtype)  # [V, 1]
     snr_db = radar_snr_db(range_m, rcs, params, config)
-    snr_db = snr_db - config.occlusion_loss_db * shadow
+    snr_db = snr_db - config.occlusion_loss_db * shadow - weather.radar_loss_db(range_m)
     gates = (
         (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
         (params.range_m - range_m, tau.range_m * temperature),
@@ -83,18 +86,18 @@ def _radar_terms(tracks: Tracks, params: RadarParams, config: RadarConfig, mode:
 
 def radar_p_detect(
     scene: Scene, params: RadarParams, config: RadarConfig, *, mode: Mode = "soft",
-    temperature: float | Float[Array, ""] = 1.0,
+    temperature: float | Float[Array, ""] = 1.0, weather: Weather = CLEAR,
 ) -> Float[Array, "T V"]:
     """Radar detection probability [T, V] (soft, differentiable in `params`) or 0/1 (hard).
 
     `temperature` scales every soft-gate temperature of `config` (temperature continuation).
     """
-    return p_detect_of(_radar_terms, scene, params, config, mode, temperature)
+    return p_detect_of(_radar_terms, scene, params, config, mode, temperature, weather)
 
 
 def radar_detect(
     scene: Scene, params: RadarParams, config: RadarConfig, key: KeyOrNoise, *,
-    mode: Mode = "soft", temperature: float | Float[Array, ""] = 1.0,
+    mode: Mode = "soft", temperature: float | Float[Array, ""] = 1.0, weather: Weather = CLEAR,
 ) -> Detections:
     """Radar `Detections` [T, V]: p_detect and noisy range/azimuth measurements in the world."""
-    return detect_of(_radar_terms, scene, params, config, key, mode, temperature)
+    return detect_of(_radar_terms, scene, params, config, key, mode, temperature, weather)

@@ -24,6 +24,7 @@ from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._measure import KeyOrNoise
 from diffsense.sensors._params import ParamSpec
+from diffsense.sensors._weather import CLEAR, Weather
 
 
 class Sensor(eqx.Module):
@@ -46,8 +47,9 @@ class Sensor(eqx.Module):
 
     @abc.abstractmethod
     def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode,
-                temperature: Float[ArrayLike, ""]) -> Detections:
-        """`detect` with r complete (every parameter named) and checked."""
+                temperature: Float[ArrayLike, ""], weather: Weather) -> Detections:
+        """`detect` with r complete (every parameter named) and checked; a sensor the weather
+        does not affect ignores `weather`."""
 
     def defaults(self) -> dict[str, float]:
         """The default value of every differentiable parameter."""
@@ -62,12 +64,13 @@ class Sensor(eqx.Module):
         raise InputError(f"unknown {self.kind} parameter {name!r} (known: {known})")
 
     def detect(self, scene: Scene, r: Mapping[str, Any] | None = None, noise: KeyOrNoise | None = None, *,
-               mode: Mode = "soft", temperature: Float[ArrayLike, ""] = 1.0) -> Detections:
+               mode: Mode = "soft", temperature: Float[ArrayLike, ""] = 1.0, weather: Weather = CLEAR) -> Detections:
         """The sensor looking at `scene` [T, V] with parameters r (defaults for those not given).
 
         `mode` "soft" gives detection probabilities differentiable in r; "hard" the 0/1
         detections. `noise` is a PRNG key fixing the measurement-noise draws (common random
         numbers across r), or the draws themselves ([2, T, V] from `measurement_noise`).
+        `weather` is the scene's (`Weather`; clear by default).
         """
         full = self.defaults()
         for name, value in (r or {}).items():
@@ -75,7 +78,7 @@ class Sensor(eqx.Module):
             full[name] = value
         if noise is None:
             raise InputError("detect needs a noise key (or the noise draws)")
-        return self._detect(scene, full, noise, mode, temperature)
+        return self._detect(scene, full, noise, mode, temperature, weather)
 
 
 def params_of(cls: type, r: Mapping[str, Any]) -> Any:

@@ -40,8 +40,9 @@ class Radar(Sensor):
     def mount_x_m(self) -> float:
         return float(self.config.mount_x_m)
 
-    def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode, temperature) -> Detections:
-        return radar_detect(scene, params_of(RadarParams, r), self.config, noise, mode=mode, temperature=temperature)
+    def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode, temperature, weather) -> Detections:
+        return radar_detect(scene, params_of(RadarParams, r), self.config, noise, mode=mode, temperature=temperature,
+                            weather=weather)
 
 
 class Camera(Sensor):
@@ -67,8 +68,9 @@ class Camera(Sensor):
     def mount_x_m(self) -> float:
         return float(self.config.mount_x_m)
 
-    def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode, temperature) -> Detections:
-        return camera_detect(scene, params_of(CameraParams, r), self.config, noise, mode=mode, temperature=temperature)
+    def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode, temperature, weather) -> Detections:
+        return camera_detect(scene, params_of(CameraParams, r), self.config, noise, mode=mode, temperature=temperature,
+                             weather=weather)
 
 
 register("radar", Radar.from_toml)

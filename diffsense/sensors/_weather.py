@@ -44,8 +44,10 @@ beta = 3.912 / V + beta_rain (`camera_extinction_1pm`): 25 mm/h alone gives a vi
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -192,3 +194,32 @@ def contrast_range_m(
     beta = _float(extinction_1pm)
     nepers = jnp.log(jnp.asarray(intrinsic_contrast, beta.dtype) / threshold)
     return _contrast_limit(beta, nepers)
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class Weather:
+    """The weather a scene is seen in: ODD parameters, differentiable like sensor parameters.
+
+    Attributes:
+        rain_mm_h: rain rate [mm/h] (0: no rain). Radar: ITU-R P.838-3 two-way attenuation;
+            camera: an optical extinction added to fog's.
+        fog_visibility_m: meteorological visibility of fog [m] (+inf: no fog). Camera only:
+            Koschmieder's contrast range limits how far it sees.
+    The default is clear weather, under which every sensor model is unchanged bit for bit.
+    """
+
+    rain_mm_h: Float[ArrayLike, ""] = 0.0
+    fog_visibility_m: Float[ArrayLike, ""] = math.inf
+
+    def radar_loss_db(self, range_m: Float[Array, "*S"]) -> Float[Array, "*S"]:
+        """Two-way rain loss of an echo from `range_m` [dB]; exactly 0 without rain."""
+        return rain_two_way_loss_db(range_m, jnp.asarray(self.rain_mm_h, range_m.dtype))
+
+    def camera_range_m(self, dtype) -> Float[Array, ""]:
+        """How far the camera resolves a vehicle's contrast [m]; +inf in clear weather."""
+        beta = camera_extinction_1pm(jnp.asarray(self.fog_visibility_m, dtype), jnp.asarray(self.rain_mm_h, dtype))
+        return contrast_range_m(beta)
+
+
+CLEAR = Weather()
