@@ -12,7 +12,7 @@ from test_sensor_scenes import make_scene
 
 from diffsense.errors import InputError
 from diffsense.scene import CAR, TRUCK
-from diffsense.sensors import Camera, Radar
+from diffsense.sensors import CLEAR, Camera, Radar, Weather
 from diffsense.sensors._fusion import Suite, fuse
 from diffsense.sensors._member import Covariance, member_view
 from tests._toy_pipeline import ToySensor
@@ -36,16 +36,19 @@ def scene(dtype=np.float64):
 # Compiled once per (sensor, mode): eager JAX compiles every primitive on its own, far slower here.
 detect = eqx.filter_jit(lambda s, sc, r, k, mode, t: s.detect_with_covariance(sc, r, k, mode=mode, temperature=t))
 view = eqx.filter_jit(member_view)
-sensor_detect = eqx.filter_jit(lambda s, sc, r, k, mode, t: s.detect(sc, r, k, mode=mode, temperature=t))
+sensor_detect = eqx.filter_jit(lambda s, sc, r, k, mode, t, w=CLEAR: s.detect(sc, r, k, mode=mode, temperature=t,
+                                                                                weather=w))
 
 
 @pytest.mark.parametrize("sensor", [RADAR, CAMERA], ids=["radar", "camera"])
 @pytest.mark.parametrize("mode", ["soft", "hard"])
 def test_member_view_is_exactly_the_sensors_detections(sensor, mode):
+    """In rain and fog (both sensors lose range there), bit for bit."""
     sc = scene()
     r = sensor.defaults() | {"hfov_deg": 90.0}
-    det, _ = view(sensor, sc, r, KEY, mode, 1.5)
-    ref = sensor_detect(sensor, sc, r, KEY, mode, 1.5)
+    weather = Weather(rain_mm_h=40.0, fog_visibility_m=150.0)
+    det, _ = view(sensor, sc, r, KEY, mode, 1.5, weather)
+    ref = sensor_detect(sensor, sc, r, KEY, mode, 1.5, weather)
     for a, b in zip(jax.tree.leaves(det), jax.tree.leaves(ref)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 

@@ -5,8 +5,8 @@ Strategy:
    evaluated on the HARD objective; its best points are the starts;
 2. from each start, optimistix BFGS minimises the SOFT J at each temperature of the
    continuation schedule, largest first, each level warm-started from the one before;
-3. each start's answer is checked on the HARD objective, and the answer is the best hard J of
-   all answers and sample points (so it is never worse than the sample's best);
+3. each start's answer at every temperature is checked on the HARD objective, and the answer
+   is the best hard J of all these and the sample points (never worse than the sample's best);
 4. at the answer: E_hard, E_soft, cost, the soft gradient per parameter at the last
    temperature, and which parameters lie on a bound.
 
@@ -44,7 +44,8 @@ class BoxConfig:
         starts: BFGS runs, from the best sample points [-].
         tau_schedule: temperature multipliers of the continuation, largest first.
         max_steps: BFGS steps per start and temperature (each one soft evaluation) [-].
-        max_soft: soft evaluations of the whole solve at most [-].
+        max_soft: soft evaluations of the BFGS runs at most [-] (the answer's gradient and each
+            start's soft J at the end may add one each).
         rtol, atol: BFGS's Cauchy termination on t [rad] and on the scaled J.
         first_step_rad: the first BFGS step's largest move in t [rad].
         bound_tol: distance to a bound, relative to the box, within which a parameter is put on it.
@@ -98,7 +99,7 @@ class BoxResult:
         gradient: dJ_soft/dx at r* per parameter [m per unit] (at the last temperature).
         gradient_E: dE_soft/dx at r* per parameter [m per unit].
         on_bound: per parameter "lower", "upper" or "" (interior).
-        source: "start k" (the k-th BFGS run's answer) or "sample" (a sample point was best).
+        source: "start k tau T" (the k-th BFGS run's answer at temperature T) or "sample".
         starts: every BFGS run.
         counts: distinct soft (value and gradient) and hard evaluations the solve made.
         history: every evaluation in order (`BoxFunctions.history` since the solve began).
@@ -256,11 +257,11 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
         for tau in config.tau_schedule:
             t, n = runner.run(t, float(tau), budget) if fns.counts["soft"] < budget else (t, 0)
             steps.append(n)
-        x, _ = box.snap(box.x(t))
+            x, _ = box.snap(box.x(t))
+            j_hard = fns.j_hard(x, lam)[0]  # every level's answer: the hard check is one evaluation
+            candidates.append((j_hard, f"start {k} tau {tau:g}", x))
         j_soft = fns.j_soft(x, float(config.tau_schedule[-1]), lam)[0]
-        j_hard = fns.j_hard(x, lam)[0]
         starts.append(StartResult(_named(names, points[i]), _named(names, x), j_soft, j_hard, tuple(steps)))
-        candidates.append((j_hard, f"start {k}", x))
     j_star, source, x_star = min(candidates, key=lambda c: c[0])
     x_star, flags = box.snap(x_star)
     j_soft, grad, e_soft = fns.j_soft(x_star, float(config.tau_schedule[-1]), lam)
