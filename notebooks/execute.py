@@ -5,7 +5,9 @@
     python notebooks/execute.py --fast          # small shapes (DIFFSENSE_NOTEBOOK_FAST=1), nothing written
 
 Each notebook reads DIFFSENSE_NOTEBOOK_FAST in its parameters cell. A cell that raises stops the
-run with the notebook's name and the error; written notebooks are replaced atomically.
+run with the notebook's name and the error; written notebooks are replaced atomically. The
+notebooks use only diffsense's public API; notebooks 02 and 03 run their benchmark
+(benchmarks/bench_tradeoff.py, bench_baseline.py) as a command and read its --json output.
 """
 
 from __future__ import annotations
@@ -27,13 +29,21 @@ def notebooks(prefixes: list[str]) -> list[Path]:
     return found
 
 
-def execute(path: Path, fast: bool, timeout_s: int = 3600, write: bool = True) -> float:
+def execute(path: Path, fast: bool, timeout_s: int = 3600, write: bool = True, extra_code: str = "") -> float:
     """Run one notebook in a fresh kernel with the notebooks folder as working directory;
-    returns the wall time [s]. Raises nbclient's CellExecutionError on a failing cell."""
+    returns the wall time [s]. Raises nbclient's CellExecutionError on a failing cell.
+
+    `extra_code` runs as one more cell after the notebook's own (a test reads the kernel's state
+    with it); a notebook run with it is never written back.
+    """
     import nbclient
     import nbformat
 
     nb = nbformat.read(path, as_version=4)
+    if extra_code:
+        if write:
+            raise ValueError("a notebook executed with extra_code is not written back")
+        nb.cells.append(nbformat.v4.new_code_cell(extra_code))
     old = os.environ.get(FAST_ENV)
     os.environ[FAST_ENV] = "1" if fast else "0"  # the kernel inherits this process's environment
     try:
