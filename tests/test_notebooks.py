@@ -1,19 +1,61 @@
-"""Every notebook runs top to bottom headless in fast mode (DIFFSENSE_NOTEBOOK_FAST=1) without
-an error; the committed copies carry outputs, figures and no error output."""
+"""The four notebooks: the committed copies carry outputs, figures and no error; in fast mode
+(DIFFSENSE_NOTEBOOK_FAST=1: one scenario, one variant, a few points) each runs top to bottom and
+the claims its text makes that hold at any size are checked on what the run computed.
+
+Each fast run appends one cell that writes the kernel's numbers to a JSON file (`FACTS`); the
+tests read that file. A fast run takes minutes on the 2-core machine, hence `slow`.
+"""
 
 from __future__ import annotations
 
+import importlib.util
 import json
-import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
-sys.path.insert(0, str(NOTEBOOKS))
-import execute  # noqa: E402
+_spec = importlib.util.spec_from_file_location("notebook_execute", NOTEBOOKS / "execute.py")
+execute = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(execute)
 
 PATHS = execute.notebooks([])
+FACTS_ENV = "DIFFSENSE_NOTEBOOK_FACTS"
+
+# Per notebook: the extra cell's code, run after the notebook's own; `dump` writes its JSON.
+_DUMP = "import json as _json, os as _os, numpy as _np\n" \
+        "def dump(x): _json.dump(x, open(_os.environ['" + FACTS_ENV + "'], 'w'), default=lambda a: _np.asarray(a).tolist())\n"
+FACTS = {
+    "01": _DUMP + """dump({
+    "fd": {f"{s} {p}": rows for (s, p), rows in FD.items()},
+    "decomp": [{"sensor": s, "r": r, "c": float(c.sum()), "dc": float(dc.sum()),
+                "e2": value_and_slope(PROBLEMS[s, "hfov_deg"], r)[0], "g": value_and_slope(PROBLEMS[s, "hfov_deg"], r)[1]}
+               for (s, r), (c, dc) in DECOMP.items()],
+    "temp": {f"{s} {t:g}": TEMP[s, t]["E"] for s in ("radar", "camera") for t in TAUS},
+    "hard": {s: HFOV[s]["E_hard"][::TEMP_STRIDE] for s in ("radar", "camera")},
+})
+""",
+    "02": _DUMP + """dump({"main": {"rows": [vars(r) for r in rows], "pareto": front, "ref": {k: v for k, v in vars(ref).items() if k != "dense"},
+                   "interval": [lo, hi]},
+      "interior": {"rows": [vars(r) for r in rows_in], "pareto": front_in,
+                   "ref": {k: v for k, v in vars(ref_in).items() if k != "dense"}, "interval": list(INTERIOR)}})
+""",
+    "03": _DUMP + """dump([{"interval": c.setting.interval, "step": c.setting.dense_step, "best": c.best,
+       "dense_r": c.dense.r, "dense_E": c.dense.E_hard,
+       "runs": [{"name": r.name, "r_star": r.r_star, "E_hard_star": r.E_hard_star, "counts": r.counts,
+                 "trace": [vars(e) for e in r.trace]} for r in c.runs]} for c in (comp_hfov, comp_narrow)])
+""",
+    "04": _DUMP + """dump({
+    "weights": WEIGHTS, "names": list(NAMES), "steps": STEPS_DEG,
+    "gt": {f"{w} {s} {f}": [RESULTS[(w, s, f)]["ev"].hard(r).rmse_gt for r in STEPS_DEG] for (w, s, f) in RESULTS},
+    "p_detect": {f"{w} {s} {f}": [RESULTS[(w, s, f)]["ev"].detections(r).p_detect for r in STEPS_DEG]
+                 for (w, s, f) in RESULTS},
+    "gap": {f"{w} radar": gap_to_gt(RESULTS[(w, "radar", MAIN_FILL)]) for w in WEIGHTS},
+    "vis": {f"{s} {r:g}": VIS[(s, r)] for (s, r) in VIS},
+})
+""",
+}
 
 
 def test_the_four_notebooks_exist():
@@ -30,11 +72,144 @@ def test_committed_notebook_is_executed_with_figures_and_no_error(path):
     assert not [o for o in outputs if o.get("output_type") == "error"], "an error output"
     assert any("image/png" in o.get("data", {}) for o in outputs), "no figure"
     assert path.stat().st_size < 2_000_000
+    # Public API only: no private module of diffsense, no sys.path edits, no benchmark imports.
+    source = "\n".join("".join(c["source"]) for c in code)
+    for banned in ("sys.path", "diffsense._", "from diffsense import _", "import bench_"):
+        assert banned not in source, banned
+    first = "".join(nb["cells"][0]["source"])
+    assert f"python notebooks/execute.py {path.name[:2]}" in first and "Stored outputs" in first
 
 
-@pytest.mark.parametrize("path", PATHS, ids=[p.stem for p in PATHS])
-def test_notebook_runs_in_fast_mode(path, tmp_path, monkeypatch):
-    # A private compilation cache shared by the notebooks of this session (same fast shapes).
-    monkeypatch.setenv("XDG_CACHE_HOME", str(NOTEBOOKS.parent / ".pytest_cache" / "notebook-xla"))
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    execute.execute(path, fast=True, timeout_s=600, write=False)
+def _fast_facts(prefix: str, tmp_path_factory) -> dict:
+    path = next(p for p in PATHS if p.name.startswith(prefix))
+    facts = tmp_path_factory.mktemp(f"nb{prefix}") / "facts.json"
+    with pytest.MonkeyPatch.context() as mp:
+        # A private compilation cache shared by the notebooks of this session (same fast shapes).
+        mp.setenv("XDG_CACHE_HOME", str(NOTEBOOKS.parent / ".pytest_cache" / "notebook-xla"))
+        mp.setenv("MPLBACKEND", "Agg")
+        mp.setenv(FACTS_ENV, str(facts))
+        execute.execute(path, fast=True, timeout_s=900, write=False, extra_code=FACTS[prefix])
+    return json.loads(facts.read_text())
+
+
+@pytest.mark.slow
+def test_01_fast_gradient_checks_hold(tmp_path_factory):
+    f = _fast_facts("01", tmp_path_factory)
+    # Section 2 and the summary: away from a kink the automatic derivative is exact, and the
+    # smaller-step central difference agrees with it (1e-9 or better, 5e-6 for radar range, in
+    # full mode) wherever the derivative stands well above the rounding floor.
+    checked = 0
+    for name, rows in f["fd"].items():
+        for row in rows:
+            if abs(row["fd"][0]) > 1e3 * row["floor"][0]:
+                checked += 1
+                assert min(row["rel"]) < 1e-4, (name, row)
+    assert checked >= 5, f["fd"]
+    # Section 3: the parts add up to the objective's own value and gradient.
+    assert f["decomp"]
+    for d in f["decomp"]:
+        assert d["c"] == pytest.approx(d["e2"], rel=1e-10)
+        assert d["dc"] == pytest.approx(d["g"], rel=1e-8, abs=1e-12 * abs(d["e2"]))
+    # Section 4: as tau shrinks the soft curve approaches the hard one (the gates tend to the
+    # hard indicators): the smallest multiplier, x 0.25, gives the smallest mean gap. (That the gap
+    # falls at every step from x 2 down, and that the soft curve sits below the hard one at x 1,
+    # are full-size findings: on the fast run's one scene neither holds for the radar.)
+    for sensor, hard in f["hard"].items():
+        gaps = {t: np.mean(np.abs(np.asarray(f["temp"][f"{sensor} {t:g}"]) - np.asarray(hard)))
+                for t in (0.25, 0.5, 1.0, 2.0, 4.0)}
+        assert min(gaps, key=gaps.get) == 0.25, (sensor, gaps)
+
+
+def _pareto(rows):
+    """Rows no other row beats on both run time and dE_hard (written apart from the benchmark's)."""
+    keep = set()
+    for i, a in enumerate(rows):
+        beaten = any(b["run_s"] <= a["run_s"] and b["dE_hard"] <= a["dE_hard"]
+                     and (b["run_s"] < a["run_s"] or b["dE_hard"] < a["dE_hard"]) for b in rows)
+        if not beaten:
+            keep.add(i)
+    return keep
+
+
+@pytest.mark.slow
+def test_02_fast_rows_are_scored_on_the_reference(tmp_path_factory):
+    f = _fast_facts("02", tmp_path_factory)
+    for problem in ("main", "interior"):
+        rows, ref, (lo, hi) = f[problem]["rows"], f[problem]["ref"], f[problem]["interval"]
+        assert [r["knob"] for r in rows][0] == "default" and len(rows) >= 5
+        # r*_ref is the best point of the reference grid.
+        assert ref["E_star"] == pytest.approx(min(ref["E_hard"]))
+        assert ref["r_star"] == pytest.approx(ref["r"][int(np.argmin(ref["E_hard"]))])
+        for r in rows:
+            assert lo <= r["r_star"] <= hi
+            # dE_hard = E_hard_ref(r*) - E_hard_ref(r*_ref); |r* - r*_ref|.
+            assert r["dE_hard"] == pytest.approx(r["E_hard_ref"] - ref["E_star"], abs=1e-12)
+            assert r["dr"] == pytest.approx(abs(r["r_star"] - ref["r_star"]))
+        # The temperature is a traced argument and the hard estimator runs only the hard
+        # program: those rows reuse the default's compiled problem (marked *).
+        for r in rows:
+            if r["knob"] == "temperature" or r["label"] == "hard":
+                assert r["shared"], r
+        assert set(f[problem]["pareto"]) == _pareto(rows)
+
+
+@pytest.mark.slow
+def test_03_fast_methods_are_counted_as_described(tmp_path_factory):
+    comps = _fast_facts("03", tmp_path_factory)
+    assert len(comps) == 2
+    for c in comps:
+        (lo, hi), step = c["interval"], c["step"]
+        runs = {r["name"].split(" (")[0].split(",")[0]: r for r in c["runs"]}
+        # The dense grid: every `step` from the lower bound, and the upper bound, hard only; the
+        # stepped grid: six steps, hard only.
+        r = np.asarray(c["dense_r"])
+        gaps = np.diff(r)
+        assert r[0] == lo and r[-1] == hi and np.allclose(gaps[:-1], step) and 0 < gaps[-1] <= step + 1e-9
+        assert runs["dense grid"]["counts"] == {"hard": len(r), "soft": 0, "grad": 0}
+        grid = next(r for name, r in runs.items() if name in ("paper grid", "stepped grid"))
+        assert grid["counts"] == {"hard": 6, "soft": 0, "grad": 0}
+        # Brent: once on E_hard (hard only), once on the soft E^2 (value only, no gradient).
+        assert runs["bounded Brent on E_hard"]["counts"]["soft"] == runs["bounded Brent on E_hard"]["counts"]["grad"] == 0
+        assert runs["bounded Brent on E_soft"]["counts"]["hard"] == runs["bounded Brent on E_soft"]["counts"]["grad"] == 0
+        for r in c["runs"]:
+            # Counts are programs that ran: a memoised hard point is never run again by one method
+            # (soft points are memoised by r and temperature, which the trace does not record).
+            points = [e["r"] for e in r["trace"] if e["kind"] == "hard"]
+            assert len(points) == len(set(points)) == r["counts"]["hard"], r["name"]
+            # "E_hard - best" is against the lowest E_hard any method evaluated.
+            assert r["E_hard_star"] >= c["best"] - 1e-12
+        # The continuous solve chooses its answer on E_hard after the sweep: never worse than the
+        # best of its own steps (the stepped grid's answer).
+        solve = c["runs"][0]
+        assert solve["name"].startswith("continuous solve")
+        assert solve["E_hard_star"] <= grid["E_hard_star"] + 1e-12
+
+
+@pytest.mark.slow
+def test_04_fast_case_study_claims(tmp_path_factory):
+    f = _fast_facts("04", tmp_path_factory)
+    assert f["names"] == ["sc01"] and f["steps"] == [30.0, 180.0]
+    # The ground-truth-input RMSE is the same at every step (and for every fill).
+    for key, per_step in f["gt"].items():
+        assert np.array_equal(per_step[0], per_step[-1]), key
+    for w in f["weights"]:
+        assert np.array_equal(f["gt"][f"{w} radar zero"][0], f["gt"][f"{w} radar interp"][0])
+    # Detections depend neither on the fill nor on the predictor.
+    base = f["p_detect"][f"{f['weights'][0]} radar zero"]
+    for key, p in f["p_detect"].items():
+        if key.split()[1] == "radar":
+            assert np.array_equal(p, base), key
+    # Conclusions, Sc-01 (nominal variant, the only one in fast mode): 30 deg is the radar step
+    # farthest from the ground-truth curve, for every weights.
+    for w in f["weights"]:
+        gap = np.asarray(f["gap"][f"{w} radar"])[0]  # [steps]
+        assert gap[0] > gap[-1], (w, gap)
+    # Conclusions, detection timelines: "In Sc-01 (nominal), the narrow radar sees the target in
+    # 0.79 of the frames and the wide one in all of them" (the nominal variant is the fast run's).
+    from diffsense.scene import TARGET_INDEX
+
+    share = [float(np.mean(np.asarray(p)[0, :, TARGET_INDEX])) for p in base]  # [steps]
+    assert round(share[0], 2) == 0.79 and share[-1] == 1.0, share
+    # Shares of prediction instants are shares.
+    for detected, unseen in f["vis"].values():
+        assert 0.0 <= min(detected + unseen) and max(detected + unseen) <= 1.0
