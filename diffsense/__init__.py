@@ -18,10 +18,11 @@ from diffsense import predictors, sensors
 from diffsense._optimise import objective, optimise
 from diffsense._problem import Problem
 from diffsense._result import Result
+from diffsense._sensitivity import sensitivity
 from diffsense.errors import InputError
 from diffsense.metrics import Objective
 
 __all__ = [
     "InputError", "Objective", "Problem", "Result", "__version__", "objective", "optimise",
-    "predictors", "sensors",
+    "predictors", "sensitivity", "sensors",
 ]

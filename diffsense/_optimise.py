@@ -154,7 +154,8 @@ def memory_estimate_bytes(problem: Problem) -> int:
 
 
 def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = None, figures: bool = True,
-             progress: Progress | None = None, on_evaluation: Callable[[dict], None] | None = None) -> Result:
+             progress: Progress | None = None, on_evaluation: Callable[[dict], None] | None = None,
+             sensitivity: tuple[str, ...] = ()) -> Result:
     """The main job: argmin of E over the problem's box, cross-checked by the stepped sweep.
 
     One-parameter problems: the stepped sweep on E_hard, then the continuous solve inside the
@@ -162,6 +163,8 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     instead), the answer chosen on E_hard. With `figures`, the evaluations the figures draw
     are made too (`Result.curves`); with `problem.dense_check`, a dense E_hard grid.
     `E` reuses an already built `objective(problem)`; `predictor` an already loaded predictor.
+    `sensitivity` names ODD parameters ("rain_mm_h", ...) whose dr*/dtheta is computed at the
+    answer (`diffsense.sensitivity`) and kept in `Result.sensitivity`.
     `on_evaluation(event)` is called after every objective evaluation the run makes, with
     {"kind": "soft" | "hard", "E_m", "tau", "done", "planned"} (for progress displays).
     """
@@ -207,7 +210,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     if domain_note(domain):
         result = dataclasses.replace(result, notes=(*result.notes, domain_note(domain)))
     answer = near_optimal([(x[0], ev.e_hard(x[0])) for x in ev.hard_points()], lo, hi, result.r_star)
-    return Result(
+    out = Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
         r_star={name: float(result.r_star)}, E_hard_star=float(result.E_hard_star),
         E_soft_star=float(result.E_soft_star), solve=result,
@@ -215,3 +218,9 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         wall_s={"compile": clock.compile_s, "run": clock.run_s}, scenarios=tuple(E.scenario_names),
         config=_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
         flags=tuple(answer["flags"]), domain=domain, **parts)
+    if sensitivity:
+        from diffsense._sensitivity import sensitivity as implicit
+
+        say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)} (implicit function theorem)")
+        out = dataclasses.replace(out, sensitivity=implicit(problem, out, sensitivity, E=E))
+    return out

@@ -37,6 +37,8 @@ result.json schema (every key always present; non-finite numbers are written as 
     "domain"        {"factor", "validation_rmse_m": [m at 1..5 s], "scenarios": {name: {"rmse_gt_m":
                              [...], "inside": bool}}, "outside": [names]}  the predictor's domain
                              check (`diffsense._domain`); a scenario outside it also gets a note
+    "sensitivity"   {theta: {param: dr*/dtheta}} or null: how r* moves with each ODD parameter asked
+                             for (`diffsense.sensitivity`; 0 on a bound)
     "scenarios"     [string, ...]
     "config"        object   the problem as plain JSON
     "versions"      {"python", "jax", ..., "diffsense": string}
@@ -60,7 +62,7 @@ from diffsense.solve import SolveResult
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
-               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "scenarios",
+               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "sensitivity", "scenarios",
                "config", "versions")
 
 
@@ -147,6 +149,7 @@ class Result:
     near_optimal: dict[str, Any] | None = None
     flags: tuple[str, ...] = ()
     domain: dict[str, Any] | None = None
+    sensitivity: dict[str, dict[str, Any]] | None = None
 
     @property
     def sweep(self):
@@ -200,6 +203,7 @@ class Result:
             "near_optimal": self.near_optimal,
             "flags": list(self.flags),
             "domain": self.domain,
+            "sensitivity": self.sensitivity,
             "scenarios": list(self.scenarios),
             "config": self.config,
             "versions": versions(),

@@ -56,6 +56,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="seed of scenes, noise and Monte-Carlo draws")
     p.add_argument("--rain-mm-h", type=float, metavar="R", help="rain rate [mm/h] (radar attenuation, camera visibility)")
     p.add_argument("--fog-visibility-m", type=float, metavar="V", help="fog visibility [m] (camera contrast range)")
+    p.add_argument("--sensitivity", metavar="THETA,...",
+                   help="ODD parameters whose dr*/dtheta to report: rain_mm_h, fog_visibility_m")
     p.add_argument("--dense-check", type=float, metavar="STEP",
                    help="also evaluate E_hard every STEP (parameter units, e.g. 0.5 deg) over the "
                    "interval and report whether r* lies in the basin of the best dense point")
@@ -134,6 +136,16 @@ def _check_inputs(problems_: list) -> None:
             raise InputError(f"--model {problem.predictor}: not a file")
 
 
+def _sensitivity_names(text: str | None) -> tuple[str, ...]:
+    from diffsense._sensitivity import ODD_PARAMETERS
+
+    names = tuple(t.strip() for t in (text or "").split(",") if t.strip())
+    unknown = [t for t in names if t not in ODD_PARAMETERS]
+    if unknown:
+        raise InputError(f"--sensitivity: no sensitivity to {unknown[0]!r} (known: {', '.join(ODD_PARAMETERS)})")
+    return names
+
+
 def _check_memory(todo: list, max_memory_gb: float | None) -> None:
     """Refuse, before any computation, a run whose estimated memory exceeds the limit."""
     import os
@@ -161,6 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(f"--out {out} exists and is not a folder")
     from diffsense._io import check_writable, output_set
 
+    _sensitivity_names(args.sensitivity)
     check_writable(out)  # before any computation
     _check_memory(todo, args.max_memory_gb)
 
@@ -171,6 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     from diffsense.predictors import load_predictor
 
     progress = Progress(args.quiet)
+    theta = _sensitivity_names(args.sensitivity)
 
     model = todo[0].predictor
     predictor = load_predictor(model or None)  # a bad checkpoint fails before any output
@@ -181,7 +195,8 @@ def main(argv: list[str] | None = None) -> int:
     with output_set(out) as staging:
         for problem in todo:
             folder = staging / problem.sensor_kind if len(todo) > 1 else staging
-            result = ds.optimise(problem, predictor=predictor, progress=progress, on_evaluation=progress.evaluation)
+            result = ds.optimise(problem, predictor=predictor, progress=progress, on_evaluation=progress.evaluation,
+                                 sensitivity=theta)
             results[problem.sensor_kind] = report.write_run(result, folder)
         if len(results) > 1:
             first = next(iter(results.values()))

@@ -70,6 +70,9 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
         f"wall {wall['compile']:.1f} s compile + {wall['run']:.1f} s run",
     ]
     lines += [f"note: {n}" for n in result.get("notes", [])]
+    for theta, d in (result.get("sensitivity") or {}).items():
+        lines += [f"dr*/d{theta}: " + ", ".join(f"{p} {v:+.4g}" if v is not None else f"{p} undefined"
+                                                for p, v in d.items())]
     from diffsense._answer import explain
 
     near = result.get("near_optimal") or {}
