@@ -143,12 +143,16 @@ def test_radar_partial_occlusion_costs_15_db_per_covered_fraction():
 #   Pt 14 + 2 G 34.8079 (G = 10 log10(0.6 * 4 pi / (0.523599 * 0.261799)) = 17.4039 dBi)
 #   + 20 log10(3.8934 mm) -48.1934 + 10 - 30 log10(4 pi) 32.9763
 #   - noise floor (-174 + 10 log10(25e3) 43.9794 + NF 4.8 = -125.2206 dBm) - loss 6
-#   = 96.8588 dB - 40 log10(R) - 2 * 0.4 dB/km * R.
-@pytest.mark.parametrize("range_m, snr_db", [(20.0, 44.8016), (50.0, 28.8600), (100.0, 16.7788),
-                                             (200.0, 4.6576)])
+#   = 96.858781 dB - 40 log10(R) - 2 * 0.4 dB/km * R
+# (the far-field equation is clamped at R = 1 mm: 96.858781 + 120 = 216.858780 dB below it).
+@pytest.mark.parametrize("range_m, snr_db", [(20.0, 44.801581), (50.0, 28.859981),
+                                             (100.0, 16.778781), (200.0, 4.657581),
+                                             (0.5, 108.899581), (0.0, 216.858780)])
 def test_radar_snr_against_a_hand_link_budget(range_m, snr_db):
     got = float(sensor.radar_snr_db(jnp.asarray(range_m), 10.0, RADAR.params, RADAR))
-    assert got == pytest.approx(snr_db, abs=1e-3)
+    assert got == pytest.approx(snr_db, abs=2e-6)
+    if range_m < 1.0:
+        return
     # The radar equation in linear power with the physical kT0 (1.380649e-23 J/K * 290 K =
     # -173.975 dBm/Hz, which the model rounds to -174): 0.025 dB lower.
     lam, gain = 299792458.0 / 77e9, 0.6 * 4 * math.pi / (math.radians(30) * math.radians(15))

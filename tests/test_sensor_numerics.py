@@ -160,3 +160,19 @@ def test_occluded_fraction_sums_overlaps_and_caps_at_one():
     one = np.asarray(occluded_fraction(r, az, half, occ.at[2].set(False), "hard", 1.0, 0.01))
     assert float(one[0, 0]) == pytest.approx(0.7, abs=1e-12)
     assert float(one[3, 0]) == pytest.approx((0.2 + 0.18) / 1.0, abs=1e-12)
+
+
+def test_detect_batch_passes_mode_and_temperature_through():
+    # A car at the camera's resolvability edge at 180 deg (73.335 m): soft p ~ 1/2 moves with the
+    # temperature, hard p is 1.
+    from diffsense import sensors as sensor
+
+    config = sensor.load_config("camera")
+    params = sensor.make_params(config, hfov_deg=180.0)
+    one = make_scene([[0.0, config.mount_x_m + 73.335]], [[0.0, 0.0]])
+    scenes = jax.tree.map(lambda a: jnp.stack([a, a]), one)
+    key = jax.random.key(3, impl="rbg")
+    for mode, temperature in (("hard", 1.0), ("soft", 1.0), ("soft", 3.0)):
+        batch = sensor.detect_batch(scenes, params, config, key, mode=mode, temperature=temperature)
+        single = sensor.p_detect(one, params, config, mode=mode, temperature=temperature)
+        np.testing.assert_allclose(np.asarray(batch.p_detect[1]), np.asarray(single), rtol=1e-12)

@@ -114,6 +114,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rev", default="HEAD", help="commit to test (default HEAD)")
     parser.add_argument("--workdir", type=Path, help="scratch directory (default: a new temp dir)")
     parser.add_argument("--max-children", type=int, default=1, help="parallel mutants (default 1)")
+    parser.add_argument("--mutants", nargs="*", default=[],
+                        help="run only these mutants (names from an earlier report; the names "
+                             "hold while the package's source is unchanged), e.g. to re-check "
+                             "survivors after adding tests")
     parser.add_argument("--report-only", action="store_true",
                         help="only (re)write the report of the finished run in --workdir")
     args = parser.parse_args(argv)
@@ -136,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     tests = _configure(workdir, args.package, args.files)
     print(f"mutating diffsense/{args.package} of {commit[:12]} in {workdir}", flush=True)
     start = time.perf_counter()
-    run = subprocess.run(["mutmut", "run", "--max-children", str(args.max_children)], cwd=workdir)
+    run = subprocess.run(["mutmut", "run", "--max-children", str(args.max_children), *args.mutants],
+                         cwd=workdir)
     wall_s = time.perf_counter() - start
     if not (workdir / "mutants" / "mutmut-stats.json").exists():
         print(f"error: mutmut collected no test statistics (exit {run.returncode}): run the "
