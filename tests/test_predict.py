@@ -267,15 +267,30 @@ def test_lstm_hand_written_backward_matches_autodiff():
     w = [rng.normal(size=s) for s in ((n_in, 4 * hidden), (hidden, 4 * hidden), (4 * hidden,))]
     xs, x1 = rng.normal(size=(t, n, n_in)), rng.normal(size=(n, n_in))
     probe_last, probe_all = rng.normal(size=(n, hidden)), rng.normal(size=(t, n, hidden))
+    emb = [rng.normal(size=(2, n_in)), rng.normal(size=n_in)]
+    xy = rng.normal(size=(t, n, 2))
+
+    def embedded(x, a, c):  # leaky_relu(x @ a + c), slope 0.1
+        z = x @ a + c
+        return jnp.where(z >= 0, z, 0.1 * z)
+
     cases = [
         (lambda x, *p: lstm_last(x, *p), lambda x, *p: _textbook_lstm(x, *p)[-1], xs, probe_last),
+        (
+            lambda x, *p: lstm_last(x, *p[:3], emb=p[3:]),
+            lambda x, *p: _textbook_lstm(embedded(x, *p[3:]), *p[:3])[-1],
+            xy,
+            probe_last,
+        ),
         (lambda x, *p: lstm_repeat(t, x, *p), lambda x, *p: _textbook_lstm(jnp.broadcast_to(x, (t,) + x.shape), *p), x1, probe_all),
     ]
-    for got_fn, want_fn, x, probe in cases:
-        np.testing.assert_allclose(got_fn(x, *w), want_fn(x, *w), rtol=1e-13, atol=1e-14)
-        got = jax.grad(lambda *a: jnp.sum(probe * got_fn(*a)), argnums=(0, 1, 2, 3))(x, *w)
-        want = jax.grad(lambda *a: jnp.sum(probe * want_fn(*a)), argnums=(0, 1, 2, 3))(x, *w)
-        for g, ref in zip(got, want):
+    for case, (got_fn, want_fn, x, probe) in enumerate(cases):
+        p = w + emb if case == 1 else w
+        np.testing.assert_allclose(got_fn(x, *p), want_fn(x, *p), rtol=1e-13, atol=1e-14)
+        argnums = tuple(range(len(p) + 1))
+        got = jax.grad(lambda *a: jnp.sum(probe * got_fn(*a)), argnums=argnums)(x, *p)
+        want = jax.grad(lambda *a: jnp.sum(probe * want_fn(*a)), argnums=argnums)(x, *p)
+        for g, ref in zip(got, want, strict=True):
             np.testing.assert_allclose(g, ref, rtol=1e-12, atol=1e-13)
         # Under jit as well (XLA fuses the unrolled forward differently from eager mode).
-        np.testing.assert_allclose(jax.jit(got_fn)(x, *w), want_fn(x, *w), rtol=1e-13, atol=1e-14)
+        np.testing.assert_allclose(jax.jit(got_fn)(x, *p), want_fn(x, *p), rtol=1e-13, atol=1e-14)

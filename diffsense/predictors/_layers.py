@@ -14,17 +14,12 @@ import jax.numpy as jnp
 from flax import nnx
 from jaxtyping import Array, Float
 
-from diffsense.predictors._lstm import lstm_last, lstm_repeat
+from diffsense.predictors._lstm import leaky_relu, lstm_last, lstm_repeat
 
 
 def _uniform(rngs: nnx.Rngs, shape: tuple[int, ...], fan_in: int) -> jax.Array:
     bound = 1.0 / math.sqrt(fan_in)
     return jax.random.uniform(rngs.params(), shape, jnp.float32, -bound, bound)
-
-
-def leaky_relu(x: jax.Array) -> jax.Array:
-    """LeakyReLU with slope 0.1, the reference's only hidden activation."""
-    return jnp.where(x >= 0, x, 0.1 * x)
 
 
 class Linear(nnx.Module):
@@ -55,9 +50,11 @@ class LSTM(nnx.Module):
     def _weights(self):
         return self.w_ih[...], self.w_hh[...], self.b_ih[...] + self.b_hh[...]
 
-    def final(self, x: Float[Array, "T N n_in"]) -> Float[Array, "N H"]:
-        """The last hidden state of each sequence (time-major input)."""
-        return lstm_last(x, *self._weights())
+    def final(self, x: Float[Array, "T N d"], embedding: Linear | None = None) -> Float[Array, "N H"]:
+        """The last hidden state of each sequence (time-major input); with `embedding`, the LSTM's
+        input is leaky_relu(embedding(x_t)), formed inside the recurrence."""
+        emb = None if embedding is None else (embedding.weight[...], embedding.bias[...])
+        return lstm_last(x, *self._weights(), emb=emb)
 
     def repeated(self, x: Float[Array, "N n_in"], steps: int) -> Float[Array, "T N H"]:
         """Hidden states of `steps` steps whose input is `x` at every step (the decoder's case:

@@ -71,33 +71,50 @@ def _gate_grads(dh, dc_next, t, c, c_prev, hidden):
     return dz, dc * f
 
 
-class _Gates:
-    """gates(x_t, h) = tanh of the halved pre-activations; `x` is [T, N, in] or [N, in] (repeated)."""
+def leaky_relu(x: jax.Array) -> jax.Array:
+    """LeakyReLU with slope 0.1, the reference's only hidden activation."""
+    return jnp.where(x >= 0, x, 0.1 * x)
 
-    def __init__(self, x, w_ih, w_hh, b):
+
+class _Gates:
+    """gates(x_t, h) = tanh of the halved pre-activations. `x` is [T, N, d] (a sequence) or [N, in]
+    (repeated). A sequence may come with an embedding (emb_w [d, in], emb_b [in]): the LSTM input
+    is then leaky_relu(x_t @ emb_w + emb_b), formed inside the step (d = 2 for CS-LSTM's (x, y):
+    two multiply-adds, no [T, N, in] array)."""
+
+    def __init__(self, x, emb, w_ih, w_hh, b):
         hidden = w_hh.shape[0]
-        self.hidden, self.repeated = hidden, x.ndim == 2
+        self.hidden, self.repeated, self.emb = hidden, x.ndim == 2, emb
         wi, self.wh, bs = (_halve_ifo(a, hidden) for a in (w_ih, w_hh, b))
         if self.repeated:
             self.xw = x @ wi + bs  # the same input at every step: projected once
         else:
-            self.w, self.bs = jnp.concatenate([wi, self.wh], 0), bs
+            self.w, self.bs, self.n_in = jnp.concatenate([wi, self.wh], 0), bs, wi.shape[0]
+
+    def pre_embedding(self, xt):
+        emb_w, emb_b = self.emb
+        return sum(xt[..., k : k + 1] * emb_w[k] for k in range(emb_w.shape[0])) + emb_b
+
+    def input(self, xt):
+        return xt if self.emb is None else leaky_relu(self.pre_embedding(xt))
 
     def __call__(self, xt, h):
         if self.repeated:
             return jnp.tanh(self.xw + h @ self.wh)
-        return jnp.tanh(jnp.concatenate([xt, h], -1) @ self.w + self.bs)
+        if h is None:  # h = 0: no recurrent matmul
+            return jnp.tanh(self.input(xt) @ self.w[: self.n_in] + self.bs)
+        return jnp.tanh(jnp.concatenate([self.input(xt), h], -1) @ self.w + self.bs)
 
 
-def _primal(steps, x, w_ih, w_hh, b):
-    gates = _Gates(x, w_ih, w_hh, b)
+def _primal(steps, x, emb, w_ih, w_hh, b):
+    gates = _Gates(x, emb, w_ih, w_hh, b)
     h = c = jnp.zeros((x.shape[-2], gates.hidden), x.dtype)
     hs = []
     for k in range(steps):
-        if k == 0:  # h = 0: no recurrent matmul
-            t = jnp.tanh(gates.xw if gates.repeated else x[0] @ gates.w[: x.shape[-1]] + gates.bs)
+        if gates.repeated:
+            t = jnp.tanh(gates.xw) if k == 0 else gates(None, h)
         else:
-            t = gates(None if gates.repeated else x[k], h)
+            t = gates(x[k], h if k else None)
         h, c = _cell(t, c, gates.hidden)
         hs.append(h)
     return hs
@@ -107,8 +124,8 @@ def _remat(steps, x, hidden) -> bool:
     return steps * x.shape[-2] * 4 * hidden * x.dtype.itemsize > REMAT_BYTES
 
 
-def _fwd(steps, last_only, x, w_ih, w_hh, b):
-    gates, remat = _Gates(x, w_ih, w_hh, b), _remat(steps, x, w_hh.shape[0])
+def _fwd(steps, last_only, x, emb, w_ih, w_hh, b):
+    gates, remat = _Gates(x, emb, w_ih, w_hh, b), _remat(steps, x, w_hh.shape[0])
 
     def step(carry, xt):
         h, c = carry
@@ -120,12 +137,12 @@ def _fwd(steps, last_only, x, w_ih, w_hh, b):
     (h_last, c_last), (hs, h_prev, c_prev, ts) = jax.lax.scan(
         step, (zeros, zeros), None if gates.repeated else x, length=steps
     )
-    return h_last if last_only else hs, (x, h_prev, c_prev, ts, c_last, w_ih, w_hh, b)
+    return h_last if last_only else hs, (x, emb, h_prev, c_prev, ts, c_last, w_ih, w_hh, b)
 
 
 def _bwd(steps, last_only, res, dhs):
-    x, h_prev, c_prev, ts, c_last, w_ih, w_hh, b = res
-    gates = _Gates(x, w_ih, w_hh, b)
+    x, emb, h_prev, c_prev, ts, c_last, w_ih, w_hh, b = res
+    gates = _Gates(x, emb, w_ih, w_hh, b)
     hidden, repeated = gates.hidden, gates.repeated
     w_back = w_hh.T if repeated else jnp.concatenate([w_hh, w_ih], 0).T  # [4H, H (+ in)]
 
@@ -136,24 +153,30 @@ def _bwd(steps, last_only, res, dhs):
         dz, dc_prev = _gate_grads(dh_next if dh_t is None else dh_next + dh_t, dc_next, t, c, cp, hidden)
         back = dz @ w_back
         if repeated:
-            return (back, dc_prev, cp, dz_sum + dz), (dz, None)
-        return (back[:, :hidden], dc_prev, cp, None), (dz, back[:, hidden:])
+            return (back, dc_prev, cp, dz_sum + dz), (dz, None, None)
+        d_in = back[:, hidden:]  # dL/d(LSTM input at t)
+        if emb is None:
+            return (back[:, :hidden], dc_prev, cp, None), (dz, d_in, None)
+        d_pre = jnp.where(gates.pre_embedding(xt) >= 0, d_in, 0.1 * d_in)
+        return (back[:, :hidden], dc_prev, cp, None), (dz, d_pre @ emb[0].T, d_pre)
 
     zeros = jnp.zeros_like(c_last)
     dz0 = jnp.zeros(zeros.shape[:-1] + (4 * hidden,), zeros.dtype) if repeated else None
     # Only the last state's gradient (the encoder): it starts the carry, no [T, N, H] of zeros.
     init = (dhs, zeros, c_last, dz0) if last_only else (zeros, zeros, c_last, dz0)
     xs = (None if last_only else dhs, None if repeated else x, None if ts is not None else h_prev, c_prev, ts)
-    (_, _, _, dz_sum), (dzs, dx) = jax.lax.scan(step, init, xs, reverse=True)
+    (_, _, _, dz_sum), (dzs, dx, d_pre) = jax.lax.scan(step, init, xs, reverse=True)
     dw_hh = jnp.einsum("tnh,tng->hg", h_prev, dzs)
     if repeated:
-        return dz_sum @ w_ih.T, x.T @ dz_sum, dw_hh, dz_sum.sum(0)
-    return dx, jnp.einsum("tni,tng->ig", x, dzs), dw_hh, dzs.sum((0, 1))
+        return dz_sum @ w_ih.T, None, x.T @ dz_sum, dw_hh, dz_sum.sum(0)
+    inputs = x if emb is None else jax.vmap(gates.input)(x)
+    d_emb = None if emb is None else (jnp.einsum("tnd,tni->di", x, d_pre), d_pre.sum((0, 1)))
+    return dx, d_emb, jnp.einsum("tni,tng->ig", inputs, dzs), dw_hh, dzs.sum((0, 1))
 
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
-def _lstm(steps, last_only, x, w_ih, w_hh, b):
-    hs = _primal(steps, x, w_ih, w_hh, b)
+def _lstm(steps, last_only, x, emb, w_ih, w_hh, b):
+    hs = _primal(steps, x, emb, w_ih, w_hh, b)
     return hs[-1] if last_only else jnp.stack(hs)
 
 
@@ -168,11 +191,16 @@ def lstm_repeat(
     b: Float[Array, "4H"],
 ) -> Float[Array, "T N H"]:
     """All `steps` hidden states of a one-layer LSTM fed `x` at every step."""
-    return _lstm(steps, False, x, w_ih, w_hh, b)
+    return _lstm(steps, False, x, None, w_ih, w_hh, b)
 
 
 def lstm_last(
-    x: Float[Array, "T N n_in"], w_ih: Float[Array, "n_in 4H"], w_hh: Float[Array, "H 4H"], b: Float[Array, "4H"]
+    x: Float[Array, "T N d"],
+    w_ih: Float[Array, "n_in 4H"],
+    w_hh: Float[Array, "H 4H"],
+    b: Float[Array, "4H"],
+    emb: tuple[Float[Array, "d n_in"], Float[Array, "n_in"]] | None = None,
 ) -> Float[Array, "N H"]:
-    """The last hidden state of a one-layer LSTM over a time-major sequence."""
-    return _lstm(x.shape[0], True, x, w_ih, w_hh, b)
+    """The last hidden state of a one-layer LSTM over a time-major sequence; with `emb` =
+    (emb_w, emb_b) the LSTM's input is leaky_relu(x_t @ emb_w + emb_b) (slope 0.1)."""
+    return _lstm(x.shape[0], True, x, emb, w_ih, w_hh, b)

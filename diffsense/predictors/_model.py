@@ -93,7 +93,7 @@ class CSLSTM(nnx.Module):
         """Final LSTM hidden state of each history (time on axis -2)."""
         lead = xy.shape[:-2]
         seq = jnp.moveaxis(xy.reshape((-1, HIST_LEN, 2)), 1, 0)  # [T, N, 2]
-        return self.enc_lstm.final(leaky_relu(self.ip_emb(seq))).reshape(lead + (ENC_SIZE,))
+        return self.enc_lstm.final(seq, embedding=self.ip_emb).reshape(lead + (ENC_SIZE,))
 
     def social(self, grid: Float[Array, "B 39 64"]) -> Float[Array, "B 80"]:
         """Convolutional social pooling of the filled grid (flattened channel-major like torch)."""
