@@ -25,7 +25,7 @@ from diffsense._problem import Problem
 from diffsense._result import Curves, Result
 from diffsense._timing import CompileClock
 from diffsense.errors import InputError
-from diffsense.metrics import Objective, make_objective, simulate_scenes
+from diffsense.metrics import Objective, make_objective, recorded_scenes, simulate_scenes
 from diffsense.predictors import load_predictor
 from diffsense.sensors import Weather
 from diffsense.scene import ROLE_NAMES
@@ -57,10 +57,15 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     sensor = problem.make_sensor()
     predictor = _predictor(problem) if predictor is None else predictor
     scene_key, noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))
-    scenes, index, names, weather = simulate_scenes(
-        problem.scenarios, problem.variants, scene_key, spec=predictor.spec, sensors=[sensor],
-        stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
-        dtype=dtype)
+    if problem.scenes is not None:
+        scenes, index, names, weather = recorded_scenes(
+            problem.scenes, spec=predictor.spec, sensors=[sensor], stride_frames=problem.prediction_stride_frames,
+            dtype=dtype)
+    else:
+        scenes, index, names, weather = simulate_scenes(
+            problem.scenarios, problem.variants, scene_key, spec=predictor.spec, sensors=[sensor],
+            stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
+            dtype=dtype)
     frames = prediction_frames(scenes.num_frames, problem.prediction_stride_frames, predictor.spec, scenes.dt_s)
     return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
                           fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names,
@@ -142,6 +147,8 @@ def memory_estimate_bytes(problem: Problem) -> int:
     vehicles), which dominate for large K. V is bounded by every vehicle a scenario defines."""
     from diffsense.scene import load_scenario
 
+    if problem.scenes is not None:
+        return 0  # a recording's size is known only once it is read
     itemsize = 8 if problem.float64 else 4
     total = 0
     for name in problem.scenarios:

@@ -35,6 +35,9 @@ class Problem:
         params: {name: (lo, hi)}: the free parameters and their bounds, in the units their names
             carry ("hfov_deg": degrees). Short names ("hfov") are resolved to the sensor's.
         scenarios: scenario names or TOML paths.
+        scenes: recorded traffic instead of scenarios: "highd:PATH" (a highD NN_tracks.csv, its
+            two sibling files beside it) or "ngsim:PATH" (an NGSIM trajectory CSV); one scene per
+            usable lane change (`diffsense.scene.load_recorded`).
         variants: scene variants per scenario (variant 0 nominal, the rest randomised) [-].
         seed: fixes scene variants, measurement noise and Monte-Carlo draws.
         predictor: "" for the shipped CS-LSTM weights, a weight/checkpoint path, or any object
@@ -64,6 +67,7 @@ class Problem:
     sensor: str | Sensor = "radar"
     params: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=lambda: {"hfov_deg": (30.0, 180.0)})
     scenarios: Sequence[str] = PAPER_SCENARIOS
+    scenes: str | None = None
     variants: int = 8
     seed: int = 0
     predictor: str | Predictor = ""
@@ -105,6 +109,12 @@ class Problem:
         set_("weather", None if self.weather is None else _weather(self.weather))
         if self.profile == "paper" and self.weather is not None and self.weather != _weather(None):
             raise InputError("the paper profile is the paper's clear-weather design: use the physical profile for weather")
+        if self.scenes is not None:
+            kind, sep, path = str(self.scenes).partition(":")
+            if kind not in ("highd", "ngsim") or not sep or not path:
+                raise InputError(f"recorded scenes are named 'highd:PATH' or 'ngsim:PATH', got {self.scenes!r}")
+            if not Path(path).is_file():
+                raise InputError(f"recorded scenes: {path} is not a file")
         if self.objective not in QUESTIONS:
             raise InputError(f"unknown objective {self.objective!r} (known: {', '.join(QUESTIONS)})")
         set_("miss_penalty_m2", _finite(self.miss_penalty_m2, "miss_penalty_m2"))

@@ -39,6 +39,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--interval", nargs=2, type=float, metavar=("LO", "HI"), help="interval of r (parameter units)")
     p.add_argument("--steps", help="comma-separated sweep steps (default: the paper's for hfov)")
     p.add_argument("--scenarios", help="comma-separated scenario names or TOML paths")
+    p.add_argument("--scenes", metavar="KIND:PATH",
+                   help="recorded traffic instead of scenarios: highd:NN_tracks.csv or ngsim:TRAJECTORIES.csv")
     p.add_argument("--variants", type=int, help="variants per scenario")
     p.add_argument("--model", help="predictor weights (.msgpack of this project or a PyTorch checkpoint)")
     p.add_argument("--profile", choices=("physical", "paper"),
@@ -93,6 +95,8 @@ def problems(args: argparse.Namespace) -> list:
         fields = problem_fields(settings, sensor, args.param, tuple(args.interval) if args.interval else None)
         if args.scenarios is not None:
             fields["scenarios"] = args.scenarios
+        if args.scenes is not None:
+            fields["scenes"] = args.scenes
         for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed"),
                           ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"),
                           ("profile", "profile"), ("sensor_config", "sensor_config")):
@@ -130,7 +134,7 @@ def _check_inputs(problems_: list) -> None:
     from diffsense.scene import load_scenario
 
     for problem in problems_:
-        for name in problem.scenarios:
+        for name in () if problem.scenes is not None else problem.scenarios:
             load_scenario(name)
         if isinstance(problem.predictor, str) and problem.predictor and not Path(problem.predictor).is_file():
             raise InputError(f"--model {problem.predictor}: not a file")

@@ -1,7 +1,7 @@
 """Metrics: E_RMSE(r) (the paper's Eq. 12) as a pure equinox Module, its estimators, and the
 per-horizon RMSE of both predictions against the true future."""
 
-from diffsense.metrics._build import PAPER_SCENARIOS, make_objective, relevance_reach, simulate_scenes
+from diffsense.metrics._build import PAPER_SCENARIOS, make_objective, recorded_scenes, relevance_reach, simulate_scenes
 from diffsense.metrics._estimators import ESTIMATORS, Estimator, EstimatorConfig, relaxed_bernoulli
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
 from diffsense.metrics._objective import QUESTIONS, HardEvaluation, Objective, ObjectiveData, safe_sqrt
@@ -9,6 +9,6 @@ from diffsense.metrics._objective import QUESTIONS, HardEvaluation, Objective, O
 __all__ = [
     "COVERAGE_PARTS", "QUESTIONS", "coverage_parts",
     "ESTIMATORS", "PAPER_SCENARIOS", "Estimator", "EstimatorConfig", "HardEvaluation", "Objective",
-    "ObjectiveData", "make_objective", "relaxed_bernoulli", "relevance_reach", "safe_sqrt",
+    "ObjectiveData", "make_objective", "recorded_scenes", "relaxed_bernoulli", "relevance_reach", "safe_sqrt",
     "simulate_scenes",
 ]

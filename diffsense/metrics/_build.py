@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -81,6 +82,27 @@ def simulate_scenes(
     batch = jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(s, width) for s in scenes])
     weather = Weather(rain_mm_h=np.repeat(np.asarray(rain), variants), fog_visibility_m=np.repeat(np.asarray(fog), variants))
     return batch, np.repeat(np.arange(len(scenes)), variants), tuple(names), weather
+
+
+def recorded_scenes(
+    source: str, *, spec: InputSpec, sensors: Sequence[Sensor], stride_frames: int = 4, dtype=jnp.float64,
+) -> tuple[Scene, np.ndarray, tuple[str, ...], Weather]:
+    """Scenes cut from a recording (`"highd:PATH"` or `"ngsim:PATH"`), each its own scenario of one
+    variant, reduced to their relevant vehicles like simulated ones; clear weather."""
+    from diffsense.scene import load_recorded
+
+    cut = load_recorded(source, dtype=dtype)
+    kept = []
+    for scene in cut:
+        frames = prediction_frames(scene.num_frames, stride_frames, spec, scene.dt_s)
+        kept.append(relevant_vehicles(scene, frames, **relevance_reach(spec, sensors)))
+    width = max(s.num_vehicles for s in kept)
+    batch = jax.tree.map(lambda *a: jnp.stack(a), *[_pad_vehicles(jax.tree.map(lambda a: a[None], s), width) for s in kept])
+    batch = jax.tree.map(lambda a: a[:, 0], batch)
+    stem = Path(source.partition(":")[2]).name
+    n = len(kept)
+    return (batch, np.arange(n), tuple(f"{stem}#{i}" for i in range(n)),
+            Weather(rain_mm_h=np.zeros(n), fog_visibility_m=np.full(n, np.inf)))
 
 
 def make_objective(
