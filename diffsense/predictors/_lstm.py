@@ -1,10 +1,12 @@
 """The LSTM recurrences of CS-LSTM with a hand-written backward pass.
 
-`lstm_last(x, w_ih, w_hh, b)`: the encoder, a time-major sequence [T, N, in] -> the last hidden
-state [N, H]. `lstm_repeat(steps, x, w_ih, w_hh, b)`: the decoder, whose input [N, in] is the same
-at every step -> all hidden states [T, N, H]; its input is projected once, and the gradient of
-the projection is the sum of the per-step gate gradients. `b` is b_ih + b_hh; the state starts
-at zero.
+`lstm_last(x, w_ih, w_hh, b, emb)`: the encoder, a time-major sequence [T, N, d] -> the last
+hidden state [N, H]; with emb = (emb_w, emb_b) the LSTM's input is leaky_relu(x_t @ emb_w + emb_b),
+formed inside the step (CS-LSTM's ip_emb of the (x, y) history: no [T, N, in] array).
+`lstm_repeat(steps, x, w_ih, w_hh, b)`: the decoder, whose input [N, in] is the same at every
+step -> all hidden states [T, N, H]; its input is projected once, and the gradient of the
+projection is the sum of the per-step gate gradients. `b` is b_ih + b_hh; the state starts at
+zero. Both are differentiable in every argument (reverse mode only: `jax.custom_vjp`).
 
 How it is computed (each choice measured on the 2-core CPU against the alternatives; see
 benchmarks/bench_lstm.py):
