@@ -203,7 +203,8 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
                                      max_evaluations=problem.solve.max_evaluations)
         else:
             e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
-            result = solve(e2_soft, e_hard, (lo, hi), steps=problem.steps, config=problem.solve)
+            result = solve(e2_soft, e_hard, (lo, hi), steps=problem.steps, config=problem.solve,
+                           value_and_grad=ev.host_value_and_grad)
         solve_counts = dict(ev.counts)
         say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, E_hard(r*) = {result.E_hard_star:.4f} m")
         curves = _curves(ev, E, result, lo, hi, problem.extra_curve_points, hard_only) if figures else None
@@ -222,7 +223,8 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         r_star={name: float(result.r_star)}, E_hard_star=float(result.E_hard_star),
         E_soft_star=float(result.E_soft_star), solve=result,
         programs_run={"solve": solve_counts, "figures": figure_counts},
-        wall_s={"compile": clock.compile_s, "run": clock.run_s}, scenarios=tuple(E.scenario_names),
+        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
+        scenarios=tuple(E.scenario_names),
         config=_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
         flags=tuple(answer["flags"]), domain=domain, **parts)
     if sensitivity:

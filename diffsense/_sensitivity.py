@@ -40,10 +40,14 @@ def _derivative(E: Objective, name: str, r_star, tau, on_bound):
 
 def sensitivity(problem: Problem, result: Result, theta: Sequence[str], *, E: Objective | None = None
                 ) -> dict[str, dict[str, Any]]:
-    """{theta: {param: dr*/dtheta}} at `result.r_star` [param units per theta unit]; 0 on a bound.
+    """{theta: {param: dr*/dtheta}} [param units per theta unit]; 0 on a bound.
 
+    The derivative is that of the soft optimum at the final temperature (the last continuation
+    level's r, where dE^2/dr = 0), which the reported r* stays next to: the hard polish moves
+    r* by less than the soft objective resolves. On a bound of the interval, or where the last
+    level ended on its bracket's edge, the optimum is held by a constraint and the value is 0.
     `E` reuses an already built `diffsense.objective(problem)`. A value is None where the soft
-    objective has no strict minimum at r* (the theorem does not apply there).
+    objective has no strict minimum there (the theorem does not apply).
     """
     from diffsense._optimise import objective
 
@@ -56,9 +60,13 @@ def sensitivity(problem: Problem, result: Result, theta: Sequence[str], *, E: Ob
     E = objective(problem) if E is None else E
     (param, r_star), = result.r_star.items()
     tau = result.solve.tau_schedule[-1] if result.solve.tau_schedule else 1.0
+    levels = result.solve.levels
+    held = result.on_bound or (bool(levels) and levels[-1].bound != 0)
+    if levels:
+        r_star = levels[-1].r
     out: dict[str, dict[str, Any]] = {}
     for name in theta:
         d = float(_derivative(E, name, jnp.asarray(r_star, E.dtype), jnp.asarray(tau, E.dtype),
-                              jnp.asarray(result.on_bound)))
+                              jnp.asarray(held)))
         out[name] = {param: d if jnp.isfinite(d) else None}
     return out

@@ -20,17 +20,31 @@ _active: list["CompileClock"] = []
 _registered = False
 
 
+_BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
+
+
 def _listener(event: str, duration_s: float, **_: object) -> None:
     if event in _COMPILE_EVENTS:
         for clock in _active:
             clock.compile_s += duration_s
+            # A program reached the backend: compiled, or loaded from the persistent cache.
+            clock.backend_compiles += event == _BACKEND_COMPILE
+
+
+def _event_listener(event: str, **_: object) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        for clock in _active:
+            clock.cache_hits += 1
 
 
 class CompileClock:
-    """`with CompileClock() as c: ...` then `c.compile_s`, `c.run_s`, `c.total_s` [s]."""
+    """`with CompileClock() as c: ...` then `c.compile_s`, `c.run_s`, `c.total_s` [s] and
+    `c.compiled`, the programs XLA compiled (not loaded from the persistent cache)."""
 
     def __init__(self) -> None:
         self.compile_s = 0.0
+        self.backend_compiles = 0
+        self.cache_hits = 0
         self.total_s = 0.0
         self._t0 = 0.0
 
@@ -38,6 +52,7 @@ class CompileClock:
         global _registered
         if not _registered:
             monitoring.register_event_duration_secs_listener(_listener)
+            monitoring.register_event_listener(_event_listener)
             _registered = True
         _active.append(self)
         self._t0 = time.perf_counter()
@@ -46,6 +61,11 @@ class CompileClock:
     def __exit__(self, *exc: object) -> None:
         self.total_s = time.perf_counter() - self._t0
         _active.remove(self)
+
+    @property
+    def compiled(self) -> int:
+        """Programs XLA compiled, not loaded from the persistent compilation cache."""
+        return self.backend_compiles - self.cache_hits
 
     @property
     def run_s(self) -> float:

@@ -117,18 +117,20 @@ def _flush_quietly() -> None:
 def setup_jax(float64: bool = True, compilation_cache: bool = True) -> None:
     """Configure JAX before the first computation: precision and the persistent compile cache.
 
-    The cache lives in the user's cache directory (XDG_CACHE_HOME or ~/.cache)/diffsense/jax, so
-    a second run of a command skips most compilation.
+    The cache lives in JAX_COMPILATION_CACHE_DIR when it is set, else in the user's cache
+    directory (XDG_CACHE_HOME or ~/.cache)/diffsense/jax. Every program is cached, however
+    quickly it compiled, so a second run of the same command compiles nothing.
     """
     import jax
 
     jax.config.update("jax_enable_x64", float64)
     if compilation_cache and os.environ.get("DIFFSENSE_NO_CACHE") != "1":
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-        cache_dir = base / "diffsense" / "jax"
+        cache_dir = Path(os.environ.get("JAX_COMPILATION_CACHE_DIR") or base / "diffsense" / "jax")
         try:
             cache_dir.mkdir(parents=True, exist_ok=True)
             jax.config.update("jax_compilation_cache_dir", str(cache_dir))
-            jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+            jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
         except OSError:
             pass  # a read-only home only costs speed

@@ -182,11 +182,14 @@ def _e_from_e2(e2: Any) -> float:
 class _Counted:
     """Objective and gradient callables that count their evaluations (Python side)."""
 
-    def __init__(self, e2_soft, e_hard, dtype):
+    def __init__(self, e2_soft, e_hard, dtype, value_and_grad=None):
         self.dtype = dtype
         self._e2 = e2_soft
         self._e_hard = e_hard
         self._grad = jax.jit(jax.grad(e2_soft))
+        if value_and_grad is not None:  # a host objective: compiled and memoised elsewhere
+            self._e2 = lambda r, tau: value_and_grad(float(r), float(tau))[0]
+            self._grad = lambda r, tau: value_and_grad(float(r), float(tau))[1]
         self.objective = 0
         self.gradient = 0
 
@@ -216,9 +219,26 @@ class _Gradient(eqx.Module):
         return jax.grad(self.e2_soft)(r, tau)
 
 
-def _level_secant(g, counted, y0, tau, lower, upper, probe, tol, max_steps, budget):
-    # Everything that changes between levels is a traced option, so the levels share one
-    # compiled program (`max_steps` and the solver's fields are static).
+_SECANT = BracketedSecant(rtol=0.0, atol=0.0)
+
+
+@eqx.filter_jit
+def _secant_init(y, options):
+    return _SECANT.init(None, y, None, options, jax.ShapeDtypeStruct((), y.dtype), None, frozenset())
+
+
+@eqx.filter_jit
+def _secant_step(g, y, options, state):
+    # The solver's step evaluates g at y exactly once: hand it the value measured outside.
+    y, state, _ = _SECANT.step(lambda y_, args: (g, None), y, None, options, state, frozenset())
+    return y, state
+
+
+def _level_secant(counted, y0, tau, lower, upper, probe, tol, max_steps, budget):
+    """One temperature level: optimistix's init/step/terminate loop of `BracketedSecant`, driven
+    from Python so that each gradient comes from the objective's own compiled program (no host
+    callback inside a compiled loop: every program stays in the persistent compilation cache).
+    The options are traced values: the levels share two small compiled programs."""
     options = dict(
         lower=counted.as_r(lower),
         upper=counted.as_r(upper),
@@ -226,20 +246,16 @@ def _level_secant(g, counted, y0, tau, lower, upper, probe, tol, max_steps, budg
         xtol=counted.as_r(tol),
         max_evaluations=jnp.asarray(max_steps, jnp.int32),
     )
-    sol = optx.root_find(
-        g,
-        BracketedSecant(rtol=0.0, atol=0.0),
-        counted.as_r(y0),
-        args=counted.as_r(tau),
-        options=options,
-        max_steps=budget,
-        throw=False,
-    )
-    n = int(sol.stats["num_steps"])
-    counted.gradient += n
-    if bool(sol.state.nonfinite):
-        raise FloatingPointError(f"dE^2/dr is not finite near r={float(sol.value)} (tau={tau})")
-    return float(sol.value), n, int(sol.state.bound), bool(sol.state.done)
+    y = counted.as_r(y0)
+    state = _secant_init(y, options)
+    n = 0
+    while n < budget and not (bool(state.done) or n >= max_steps):
+        g = jnp.asarray(counted.grad(float(y), tau), counted.dtype)
+        y, state = _secant_step(g, y, options, state)
+        n += 1
+    if bool(state.nonfinite):
+        raise FloatingPointError(f"dE^2/dr is not finite near r={float(y)} (tau={tau})")
+    return float(y), n, int(state.bound), bool(state.done)
 
 
 def _hard_polish(counted, r, e_hard, lower, upper, probes, min_step):
@@ -354,6 +370,7 @@ def solve(
     steps: Sequence[float] | None = None,
     config: SolveConfig = SolveConfig(),
     sweep_points: Sequence[SweepPoint] | None = None,
+    value_and_grad: Callable[[float, float], tuple[float, float]] | None = None,
 ) -> SolveResult:
     """Find argmin_r E over `interval`: stepped sweep, then the continuous solve (module doc).
 
@@ -364,6 +381,10 @@ def solve(
         steps: the sweep's steps (default: `default_steps(lo, hi)`).
         config: solver settings.
         sweep_points: an already evaluated sweep (then `steps` is ignored).
+        value_and_grad: optional host function `(r, tau) -> (E^2, dE^2/dr)` (floats), used for
+            every soft evaluation instead of tracing `e2_soft` (an objective compiled and
+            memoised elsewhere, e.g. `Evaluator`); `e2_soft` is then only traced by the
+            bisection method.
 
     Returns:
         A SolveResult. Raises InputError on a bad interval/steps/config and FloatingPointError
@@ -375,9 +396,11 @@ def solve(
     t0 = time.perf_counter()
     if sweep_points is None:
         grid = check_steps(default_steps(lo, hi) if steps is None else steps, lo, hi)
+        soft = ((lambda r, tau: value_and_grad(float(r), float(tau))[0]) if value_and_grad is not None
+                else (lambda r, tau: e2_soft(jnp.asarray(r, dtype), jnp.asarray(tau, dtype))))
         sweep_points = sweep(
             lambda r: e_hard(jnp.asarray(r, dtype)),
-            lambda r, tau: e2_soft(jnp.asarray(r, dtype), jnp.asarray(tau, dtype)),
+            soft,
             grid,
             tau=taus[-1],
         )
@@ -387,7 +410,7 @@ def solve(
     k = best_step(sweep_points)
     best = sweep_points[k]
     lower, upper = bracket_around(sweep_points, k, lo, hi)
-    counted = _Counted(e2_soft, e_hard, dtype)
+    counted = _Counted(e2_soft, e_hard, dtype, value_and_grad)
     xtol = config.xtol_rel * (hi - lo)
     notes: list[str] = []
 
@@ -404,7 +427,7 @@ def solve(
             break
         if config.method == "secant":
             r, n, bound, done = _level_secant(
-                g, counted, y, tau, lower, upper, probe, tol, max_steps, config.max_evaluations
+                counted, y, tau, lower, upper, probe, tol, max_steps, config.max_evaluations
             )
         else:
             (r, bound), n, done = _level_bisection(g, counted, y, tau, lower, upper, tol, max_steps)

@@ -88,12 +88,19 @@ class Evaluator:
     def detections(self, x, mode: str = "hard", tau: float = 1.0):
         return _detections(self.objective, jnp.asarray(self._key(x), self.dtype), jnp.asarray(tau, self.dtype), mode)
 
+    def host_value_and_grad(self, r: float, tau: float) -> tuple[float, float]:
+        """(E^2, dE^2/dr) of a one-parameter objective as floats: `solve`'s `value_and_grad`."""
+        v, g = self.value_and_grad(r, tau)
+        return v, float(g[0])
+
     def solver_fns(self, dtype=jnp.float64) -> tuple[Callable[[Any, Any], Any], Callable[[Any], float]]:
         """(e2_soft, e_hard) of a one-parameter objective in the form `diffsense.solve.solve` takes.
 
         `e2_soft(r, tau)` is traceable and differentiable in r; inside a compiled solver loop it
         reaches this wrapper's compiled program through a host callback, so the loop does not
         compile the objective a second time and every evaluation is memoised and counted here.
+        `solve` needs it only for its bisection method: give it `host_value_and_grad` too, and
+        every other evaluation goes straight to the compiled program.
         """
         spec = jax.ShapeDtypeStruct((), dtype)
 
