@@ -10,6 +10,8 @@ minimum) of --repeats interleaved rounds after a warm-up, with XLA's temporary m
 - input gradient: the hand-written backward, with the gates kept or recomputed in the backward
   pass (REMAT_BYTES forced either way), against JAX's autodiff of a textbook `lax.scan` LSTM.
 - a sum over the leading axis of a [16, 1664, 256] array: `x.sum(0)` against 15 additions.
+- the per-step matmuls alone, XLA against PyTorch (MKL), in GFLOP/s: the ceiling that the
+  recurrences run against (when torch, the `bench` extra, is installed).
 """
 
 from __future__ import annotations
@@ -114,8 +116,31 @@ def main() -> None:
     print("sum over the leading axis of [16, 1664, 256]")
     for k in sums:
         print(f"  {k:<36} {1e3 * t[k][0]:11.2f} {1e3 * t[k][1]:9.2f}")
+    _matmuls(args.repeats)
     load1 = os.getloadavg()
     print(f"load average (1 min): before {load0[0]:.2f}, after {load1[0]:.2f}")
+
+
+def _matmuls(repeats: int) -> None:
+    try:
+        import torch
+    except ImportError:
+        return
+    rng = np.random.default_rng(2)
+    shapes = {"encoder step [1664,96]@[96,256]": (1664, 96, 256), "encoder backward [1664,256]@[256,96]": (1664, 256, 96),
+              "decoder step [128,128]@[128,512]": (128, 128, 512), "6 modes [768,128]@[128,512]": (768, 128, 512)}
+    jobs = {}
+    for name, (m, k, n) in shapes.items():
+        a, b = (rng.normal(size=s).astype(np.float32) for s in ((m, k), (k, n)))
+        jobs[(name, "xla")] = (jax.jit(lambda x, y: x @ y), (jnp.asarray(a), jnp.asarray(b)))
+        ta, tb = torch.from_numpy(a), torch.from_numpy(b)
+        jobs[(name, "torch")] = (lambda x, y, ta=ta, tb=tb: ta @ tb, (None, None))
+    t = _time(jobs, repeats)
+    print(f"matmuls, GFLOP/s at the median (min) time; torch {torch.__version__}, {torch.get_num_threads()} threads")
+    for name, (m, k, n) in shapes.items():
+        flop = 2 * m * k * n
+        (xm, xn), (tm, tn) = t[(name, "xla")], t[(name, "torch")]
+        print(f"  {name:<36} xla {flop / xm / 1e9:6.0f} ({flop / xn / 1e9:4.0f})   torch {flop / tm / 1e9:6.0f} ({flop / tn / 1e9:4.0f})")
 
 
 if __name__ == "__main__":
