@@ -35,6 +35,19 @@ _LOCK = threading.RLock()
 _TEMPORARIES: dict[str, str] = {}  # path -> "file" | "tree" | "dir" (a folder made for a set)
 
 
+def register_temporary(path: str | os.PathLike[str], kind: str = "tree") -> None:
+    """Mark `path` (a "file" or a folder "tree") for removal if the process is interrupted
+    (SIGINT/SIGTERM under `diffsense.cli.run`); `release_temporary` once it has been published."""
+    with _LOCK:
+        _TEMPORARIES[str(path)] = kind
+
+
+def release_temporary(path: str | os.PathLike[str]) -> None:
+    """`path` is no longer temporary (published, or removed by its owner)."""
+    with _LOCK:
+        _TEMPORARIES.pop(str(path), None)
+
+
 def _file_mode() -> int:
     """The mode a new file gets under the process umask (read from /proc; os.umask as fallback)."""
     try:

@@ -144,3 +144,18 @@ def test_the_python_api_runs_in_the_precision_asked_for():
                           env=dict(os.environ, JAX_ENABLE_X64="0"))
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["float64", "True"]
+
+
+@pytest.mark.slow
+def test_an_interrupted_training_set_leaves_no_partial_folder(tmp_path):
+    out = tmp_path / "data"
+    proc = subprocess.Popen([sys.executable, "-m", "diffsense.scene", "generate", "--out", str(out),
+                             "--samples", "2000000", "--no-progress"], cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 600
+    while time.time() < deadline and not any(p.name.endswith(".partial") for p in tmp_path.iterdir()):
+        time.sleep(0.5)
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=120) == 130
+    assert proc.stderr.read().strip().splitlines()[-1] == "interrupted"
+    assert list(tmp_path.iterdir()) == []

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import PRNGKeyArray
 
-from diffsense._io import atomic_open, write_json
+from diffsense._io import atomic_open, register_temporary, release_temporary, write_json
 from diffsense.config import to_dict
 from diffsense.errors import InputError
 from diffsense.train._samples import (
@@ -151,6 +151,7 @@ def write_dataset(
         raise InputError(f"number of samples must be >= 1, got {num_samples}")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.", suffix=".partial"))
+    register_temporary(tmp)  # an interrupt removes it (diffsense.cli.run)
     try:
         shards, lat, lon, neighbours = [], np.zeros(3, np.int64), np.zeros(2, np.int64), 0
         for index, (first, keep, dense) in enumerate(_batches(cfg, num_samples, jax.random.key(seed))):
@@ -189,6 +190,8 @@ def write_dataset(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        release_temporary(tmp)
     return meta
 
 
