@@ -47,6 +47,8 @@ class BoxConfig:
         max_soft: soft evaluations of the BFGS runs at most [-] (the answer's gradient and each
             start's soft J at the end may add one each).
         rtol, atol: BFGS's Cauchy termination on t [rad] and on the scaled J.
+        ftol: a level also stops when J has fallen by less than ftol * |J| over its last 3
+            accepted steps (relative; earlier levels use it scaled by tau / tau_last).
         first_step_rad: the first BFGS step's largest move in t [rad].
         bound_tol: distance to a bound, relative to the box, within which a parameter is put on it.
         cost_weight: lambda in J = E + lambda * cost [m per currency unit].
@@ -60,6 +62,7 @@ class BoxConfig:
     max_soft: int = 400
     rtol: float = 1e-6
     atol: float = 1e-6
+    ftol: float = 1e-4
     first_step_rad: float = 0.5
     bound_tol: float = 1e-6
     cost_weight: float = 0.0
@@ -207,19 +210,25 @@ class _Runner:
         if g_max * scale > self.config.first_step_rad:
             scale = self.config.first_step_rad / g_max
         loose = tau / float(self.config.tau_schedule[-1])
-        solver = optx.BFGS(rtol=jnp.asarray(self.config.rtol * loose), atol=jnp.asarray(self.config.atol * loose))
+        rtol, atol = jnp.asarray(self.config.rtol * loose), jnp.asarray(self.config.atol * loose)
+        solver = optx.BFGS(rtol, atol)
         args = (jnp.asarray(tau, jnp.float64), jnp.asarray(scale, jnp.float64))
         t = jnp.asarray(t0, jnp.float64)
         state = self._init(solver, t, args)
-        steps = 0
+        steps, accepted = 0, []
         while steps < self.config.max_steps and self.fns.counts["soft"] < budget:
             t, state = self._step(solver, t, args, state)
             steps += 1
             # optimistix tests convergence on accepted steps only; near a minimum J's decrease
             # falls below rounding, Armijo rejects, and the steps shrink around the answer for
-            # ever. So stop too when the next trial point moves t by less than the tolerance.
+            # ever. So stop too when the next trial point moves t by less than the tolerance,
+            # or when J has stopped falling (its last digits are below the soft/hard mismatch).
             move = float(jnp.max(jnp.abs(state.y_eval - t)))
-            if bool(state.terminate) or move <= self.config.atol * loose + self.config.rtol * loose * float(jnp.max(jnp.abs(t))):
+            f = float(state.f_info.f)
+            if not accepted or f != accepted[-1]:
+                accepted.append(f)
+            stalled = len(accepted) >= 4 and accepted[-4] - accepted[-1] <= self.config.ftol * loose * abs(accepted[-1])
+            if bool(state.terminate) or stalled or move <= float(atol) + float(rtol) * float(jnp.max(jnp.abs(t))):
                 break
         return np.asarray(t, np.float64), steps
 

@@ -1,0 +1,277 @@
+"""Sensor-suite design: the gradient box solve against CMA-ES, optuna TPE and random search.
+
+    nice -n 19 python benchmarks/bench_suite.py [--quick] [--dims 4,8,16] [--seeds 5]
+        [--budget-per-dim 25] [--cost-weight 0.002] [--scenarios sc01,...] [--variants 2]
+        [--stride 8] [--out out/bench_suite]
+
+Problem: J(r) = E(r) + lambda * cost(r) of a fused radar + camera suite (`sensors._fusion.Suite`,
+`metrics._cost`, configs/costs.toml) with the shipped CS-LSTM, over d = 4, 8 or 16 of its
+parameters in the boxes of PARAMS (d = 16: a suite of two radars and two cameras, eight
+parameters each pair, the second pair mounted like the first: two sensors give 9 parameters).
+Every method is judged by the HARD J of the points it evaluates:
+
+    gradient    solve._box.box_solve: Halton sample of 2 d + 2 points (hard), BFGS on the soft J
+                with temperature continuation (4, 2, 1) from up to 4 of the best points while
+                the budget lasts, every level's answer checked hard
+    CMA-ES      the `cma` package on the unit cube (sigma0 0.3, default population)
+    TPE         optuna's TPESampler
+    random      uniform in the box
+
+Budgets are equal in value evaluations: a hard evaluation costs 1, a soft value-and-gradient
+costs c = (its wall time) / (a hard evaluation's), both measured here after compilation (fastest
+of 7 at random points). Each method and seed gets a fresh `Evaluator` (nothing is reused across
+runs). The table gives, per d, the best J any run found, each method's median final J over the
+seeds, and the evaluations each needs to come within 1 % of that best (median over seeds; runs
+that never do count as never). Needs the `suite-bench` extra (cma, optuna). Writes
+summary.json and best_vs_evaluations.png under --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+
+from diffsense.metrics import make_objective, simulate_scenes  # noqa: E402
+from diffsense.metrics._cost import load_costs, make_cost  # noqa: E402
+from diffsense.predictors import load_predictor  # noqa: E402
+from diffsense.sensors import Camera, Radar  # noqa: E402
+from diffsense.sensors._fusion import Suite  # noqa: E402
+from diffsense.solve import Evaluator  # noqa: E402
+from diffsense.solve._box import BoxConfig, box_solve  # noqa: E402
+from diffsense.solve._box_fns import BoxFunctions  # noqa: E402
+from diffsense.tracks import prediction_frames  # noqa: E402
+
+PAIR = {  # one radar + camera pair's eight parameters and their boxes
+    "radar.hfov_deg": (20.0, 120.0), "radar.range_m": (30.0, 200.0),
+    "camera.hfov_deg": (30.0, 150.0), "camera.width_px": (640.0, 3840.0),
+    "radar.tx_power_dbm": (0.0, 20.0), "radar.noise_figure_db": (3.0, 12.0),
+    "camera.range_m": (30.0, 200.0), "camera.baseline_m": (0.05, 0.5),
+}
+PARAMS = {4: dict(list(PAIR.items())[:4]), 8: PAIR,
+          16: PAIR | {k.replace("radar.", "radar2.").replace("camera.", "camera2."): v for k, v in PAIR.items()}}
+METHODS = ("gradient", "CMA-ES", "TPE", "random")
+LEVELS = (4.0, 2.0, 1.0)
+MAX_STEPS = 30
+
+
+def build(d: int, args, predictor):
+    """E (the objective over PARAMS[d]) and the jitted cost value-and-gradient."""
+    radar, camera = Radar.from_toml(), Camera.from_toml()
+    suite = Suite((radar, camera)) if d <= 8 else Suite((radar, camera, radar, camera),
+                                                         names=("radar", "camera", "radar2", "camera2"))
+    names = tuple(PARAMS[d])
+    scene_key, noise_key = jax.random.split(jax.random.PRNGKey(0))
+    scenes, index, scenario_names, weather = simulate_scenes(
+        args.scenarios, args.variants, scene_key, spec=predictor.spec, sensors=[suite],
+        stride_frames=args.stride, dtype=jnp.float64)
+    frames = prediction_frames(scenes.num_frames, args.stride, predictor.spec, scenes.dt_s)
+    E = make_objective(scenes, index, frames, suite, predictor, names=names, key=noise_key,
+                       scenario_names=scenario_names, weather=weather)
+    cost = make_cost(load_costs(), suite)
+    vg = jax.jit(jax.value_and_grad(lambda v: cost(dict(zip(names, v)))))
+
+    def cost_fn(x):
+        v, g = vg(jnp.asarray(x, jnp.float64))
+        return float(v), np.asarray(g)
+
+    return E, cost_fn
+
+
+def measure_c(E, bounds: np.ndarray) -> tuple[float, float, float]:
+    """(c, t_hard [s], t_value_and_grad [s]): the fastest of 7 at random points each, after
+    compiling (on a shared machine the minimum is the program's own cost; medians drift with load)."""
+    ev, rng = Evaluator(E), np.random.default_rng(123)
+    points = bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * rng.random((8, len(bounds)))
+    ev.e_hard(points[0]), ev.value_and_grad(points[0], 1.0)  # compile
+    th, tv = [], []
+    for x in points[1:]:
+        t = time.perf_counter(); ev.e_hard(x); th.append(time.perf_counter() - t)  # noqa: E702
+        t = time.perf_counter(); ev.value_and_grad(x, 1.0); tv.append(time.perf_counter() - t)  # noqa: E702
+    return float(min(tv) / min(th)), float(min(th)), float(min(tv))
+
+
+def run_gradient(E, cost_fn, bounds, lam, budget, c, seed):
+    """The box solve within `budget` evaluations: [(evaluations spent, J_hard)] per hard evaluation."""
+    d = len(bounds)
+    ev = Evaluator(E)
+    fns = BoxFunctions(E.names, ev.value_and_grad, ev.e_hard, cost_fn)
+    samples, starts = 2 * d + 2, 4
+    soft = max(0, int((budget - samples - starts * len(LEVELS)) / c) - starts - 1)
+    # Each start runs until its levels converge (ftol) or MAX_STEPS; later starts get what the
+    # earlier ones left of the budget.
+    config = BoxConfig(samples=samples, starts=starts, tau_schedule=LEVELS, max_soft=soft, max_steps=MAX_STEPS,
+                       cost_weight=lam, seed=seed)
+    result = box_solve(fns, dict(zip(E.names, map(tuple, bounds))), config)
+    spent, trace = 0.0, []
+    for e in result.history:
+        spent += c if e.kind == "soft" else 1.0
+        if e.kind == "hard":
+            trace.append((spent, e.value + lam * cost_fn(e.x)[0]))
+    return trace, {"x_star": result.x_star, "on_bound": result.on_bound, "counts": result.counts}
+
+
+def _hard_j(E, cost_fn, lam, lo, width):
+    ev = Evaluator(E)
+    return lambda u: ev.e_hard(lo + width * np.clip(u, 0.0, 1.0)) + lam * cost_fn(lo + width * np.clip(u, 0.0, 1.0))[0]
+
+
+def run_cma(E, cost_fn, bounds, lam, budget, seed):
+    import cma
+
+    lo, width = bounds[:, 0], bounds[:, 1] - bounds[:, 0]
+    j, trace = _hard_j(E, cost_fn, lam, lo, width), []
+    es = cma.CMAEvolutionStrategy(len(lo) * [0.5], 0.3, {"bounds": [0, 1], "seed": seed + 1, "verbose": -9})
+    while len(trace) < budget and not es.stop():
+        xs = es.ask()
+        values = [j(np.asarray(x)) for x in xs[: budget - len(trace)]]
+        trace += [(len(trace) + i + 1.0, v) for i, v in enumerate(values)]
+        if len(values) < len(xs):
+            break
+        es.tell(xs, values)
+    return trace, {}
+
+
+def run_tpe(E, cost_fn, bounds, lam, budget, seed):
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    lo, width = bounds[:, 0], bounds[:, 1] - bounds[:, 0]
+    j, trace = _hard_j(E, cost_fn, lam, lo, width), []
+
+    def objective(trial):
+        u = np.array([trial.suggest_float(f"u{i}", 0.0, 1.0) for i in range(len(lo))])
+        trace.append((len(trace) + 1.0, j(u)))
+        return trace[-1][1]
+
+    optuna.create_study(sampler=optuna.samplers.TPESampler(seed=seed)).optimize(objective, n_trials=budget)
+    return trace, {}
+
+
+def run_random(E, cost_fn, bounds, lam, budget, seed):
+    lo, width = bounds[:, 0], bounds[:, 1] - bounds[:, 0]
+    j = _hard_j(E, cost_fn, lam, lo, width)
+    return [(i + 1.0, j(u)) for i, u in enumerate(np.random.default_rng(seed).random((budget, len(lo))))], {}
+
+
+def to_within(trace, target: float) -> float:
+    """Evaluations spent when the best J so far first reaches `target` (inf if never)."""
+    best = math.inf
+    for spent, value in trace:
+        best = min(best, value)
+        if best <= target:
+            return spent
+    return math.inf
+
+
+def best_curve(trace, grid):
+    """Best J so far at each number of evaluations in `grid` (nan before the first)."""
+    out, best, i = [], math.nan, 0
+    for g in grid:
+        while i < len(trace) and trace[i][0] <= g:
+            best = trace[i][1] if math.isnan(best) else min(best, trace[i][1])
+            i += 1
+        out.append(best)
+    return out
+
+
+def compare(d, args, predictor):
+    E, cost_fn = build(d, args, predictor)
+    bounds = np.array(list(PARAMS[d].values()))
+    c, t_hard, t_vg = measure_c(E, bounds)
+    budget = args.budget_per_dim * d
+    print(f"d = {d}: a value-and-gradient costs c = {c:.2f} hard evaluations ({t_vg * 1e3:.1f} / "
+          f"{t_hard * 1e3:.1f} ms); budget {budget}", flush=True)
+    runs = {m: [] for m in METHODS}
+    for seed in range(args.seeds):
+        for method in METHODS:
+            t = time.perf_counter()
+            if method == "gradient":
+                trace, extra = run_gradient(E, cost_fn, bounds, args.cost_weight, budget, c, seed)
+            else:
+                fn = {"CMA-ES": run_cma, "TPE": run_tpe, "random": run_random}[method]
+                trace, extra = fn(E, cost_fn, bounds, args.cost_weight, budget, seed)
+            runs[method].append({"seed": seed, "trace": trace, "wall_s": time.perf_counter() - t} | extra)
+    best = min(v for rs in runs.values() for r in rs for _, v in r["trace"])
+    target = best + 0.01 * abs(best)
+    rows = {}
+    for method, rs in runs.items():
+        reach = [to_within(r["trace"], target) for r in rs]
+        rows[method] = {"final_J_median": float(np.median([min(v for _, v in r["trace"]) for r in rs])),
+                        "evaluations_to_1pct_median": float(np.median(reach)),
+                        "reached": int(sum(math.isfinite(x) for x in reach)),
+                        "evaluations_to_1pct": [x if math.isfinite(x) else None for x in reach]}
+    baseline = min(rows[m]["evaluations_to_1pct_median"] for m in METHODS[1:])
+    ratio = rows["gradient"]["evaluations_to_1pct_median"] / baseline if math.isfinite(baseline) else math.nan
+    return {"d": d, "names": list(PARAMS[d]), "bounds": bounds.tolist(), "c": c, "t_hard_s": t_hard,
+            "t_value_and_grad_s": t_vg, "budget": budget, "best_J": best, "rows": rows,
+            "gradient_over_best_baseline": ratio, "runs": runs}
+
+
+def report(results, args):
+    print(f"\nJ = E + {args.cost_weight:g} * cost [m]; evaluations to within 1 % of the best J any run found "
+          f"(median over {args.seeds} seeds; reached = runs that got there)")
+    print(f"{'d':>3} {'method':<9} {'median final J':>15} {'evals to 1 %':>13} {'reached':>8}")
+    for res in results:
+        for method, row in res["rows"].items():
+            e = row["evaluations_to_1pct_median"]
+            print(f"{res['d']:>3} {method:<9} {row['final_J_median']:>15.4f} "
+                  f"{(f'{e:.0f}' if math.isfinite(e) else 'never'):>13} {row['reached']:>5}/{args.seeds}")
+        print(f"    best J {res['best_J']:.4f}; gradient / best baseline = {res['gradient_over_best_baseline']:.2f} "
+              f"(target <= 0.2 at d = 8, 16)")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(results), figsize=(5 * len(results), 4), squeeze=False)
+    for ax, res in zip(axes[0], results):
+        grid = np.arange(1, res["budget"] + 1)
+        for method, rs in res["runs"].items():
+            curves = np.array([best_curve(r["trace"], grid) for r in rs])
+            ax.plot(grid, np.nanmedian(curves, axis=0), label=method)
+            ax.fill_between(grid, np.nanmin(curves, axis=0), np.nanmax(curves, axis=0), alpha=0.15)
+        ax.set(title=f"d = {res['d']}", xlabel="evaluations (value-and-gradient = c)", ylabel="best J so far [m]",
+               xscale="log")
+        ax.legend()
+    fig.tight_layout()
+    args.out.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out / "best_vs_evaluations.png", dpi=120)
+    meta = {"machine": platform.platform(), "processor": platform.processor(), "jax": jax.__version__,
+            "devices": [str(x) for x in jax.devices()], "args": {k: str(v) for k, v in vars(args).items()}}
+    (args.out / "summary.json").write_text(json.dumps({"meta": meta, "results": results}, indent=1))
+    print(f"wrote {args.out / 'summary.json'} and {args.out / 'best_vs_evaluations.png'}")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--quick", action="store_true", help="d 4 and 8, 2 seeds, sc01 x 1 variant, stride 20, budget 25 d")
+    p.add_argument("--dims", default="4,8,16")
+    p.add_argument("--seeds", type=int, default=5)
+    p.add_argument("--budget-per-dim", type=int, default=25, help="evaluations per parameter")
+    p.add_argument("--cost-weight", type=float, default=0.002, help="lambda [m per EUR]")
+    p.add_argument("--scenarios", default="sc01,sc02,sc03,sc04,sc05,sc06")
+    p.add_argument("--variants", type=int, default=2)
+    p.add_argument("--stride", type=int, default=8, help="prediction stride [frames]")
+    p.add_argument("--out", type=Path, default=Path("out/bench_suite"))
+    args = p.parse_args(argv)
+    if args.quick:
+        args.dims, args.seeds, args.budget_per_dim = "4,8", 2, 25
+        args.scenarios, args.variants, args.stride = "sc01", 1, 20
+    args.scenarios = [s for s in args.scenarios.split(",") if s]
+    predictor = load_predictor(None)
+    results = [compare(int(d), args, predictor) for d in args.dims.split(",")]
+    report(results, args)
+
+
+if __name__ == "__main__":
+    main()
