@@ -27,6 +27,8 @@ from diffsense.sensors._radar import _radar_terms
 RADAR = sensor.load_config("radar")
 CAMERA = sensor.load_config("camera")
 KEY = jax.random.key(11, impl="rbg")
+jit_radar_terms = jax.jit(lambda tracks, params, config: _radar_terms(tracks, params, config, "soft", 1.0),
+                          static_argnums=2)
 # (margin [V, T], tau) per gate, hard mode
 jit_gates = jax.jit(lambda terms, tracks, params, config: terms(tracks, params, config, "hard", 1.0)[0],
                     static_argnums=(0, 3))
@@ -203,6 +205,15 @@ def test_measurement_noise_scales_and_independence(name, hfov, range_m, sigma_r,
     _assert_gaussian(az_err, math.radians(sigma_az_deg))
     # range and azimuth come from independent draws: correlation within 3 / sqrt(n) of 0
     assert abs(np.corrcoef(range_err, az_err)[0, 1]) <= 3 / math.sqrt(DRAWS)
+
+
+@pytest.mark.parametrize("range_m, sigma_r, sigma_az_deg", [(20.0, 0.400067, 0.100212),
+                                                           (200.0, 0.845172, 0.669311)])
+def test_radar_noise_scales_exactly(range_m, sigma_r, sigma_az_deg):
+    # The scales behind the draws above, to 1e-5 (same hand numbers).
+    terms = jit_radar_terms(Tracks.of(_ahead(RADAR, [range_m])), RADAR.params, RADAR)
+    assert float(terms[3][1, 0]) == pytest.approx(sigma_r, rel=1e-5)
+    assert float(terms[4][1, 0]) == pytest.approx(math.radians(sigma_az_deg), rel=1e-5)
 
 
 def test_noise_draws_are_standard_normal_and_independent():
