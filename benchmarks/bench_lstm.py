@@ -45,7 +45,8 @@ def _scan_lstm(xs, w_ih, w_hh, b):
 def _problem(steps, n, n_in, hidden, repeated, seed=0):
     rng = np.random.default_rng(seed)
     shape = (n, n_in) if repeated else (steps, n, n_in)
-    arrays = [rng.normal(size=shape), *(rng.uniform(-0.3, 0.3, s) for s in ((n_in, 4 * hidden), (hidden, 4 * hidden), (4 * hidden,)))]
+    weights = ((n_in, 4 * hidden), (hidden, 4 * hidden), (4 * hidden,))
+    arrays = [rng.normal(size=shape), *(rng.uniform(-0.3, 0.3, s) for s in weights)]
     return [jnp.asarray(a, jnp.float32) for a in arrays]
 
 
@@ -100,7 +101,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
     load0 = os.getloadavg()
-    print(f"float32, CPU ({os.cpu_count()} cores), jax {jax.__version__}; median (min) of {args.repeats} interleaved rounds")
+    print(f"float32, CPU ({os.cpu_count()} cores), jax {jax.__version__}; "
+          f"median (min) of {args.repeats} interleaved rounds")
     print(f"{'case':<38} {'median [ms]':>11} {'min [ms]':>9} {'temp [MiB]':>11} {'compile [s]':>12}")
     for title, shape in (("encoder T=16 N=1664", (16, 1664, 32, 64, False)),
                          ("decoder T=25 N=128", (25, 128, 117, 128, True)),
@@ -111,7 +113,10 @@ def main() -> None:
         for k, (_, compile_s, temp) in rows.items():
             print(f"  {k:<36} {1e3 * t[k][0]:11.2f} {1e3 * t[k][1]:9.2f} {temp:11.1f} {compile_s:12.2f}")
     x = jnp.asarray(np.random.default_rng(1).normal(size=(16, 1664, 256)), jnp.float32)
-    sums = {"x.sum(0)": jax.jit(lambda a: a.sum(0)), "15 additions": jax.jit(lambda a: sum(a[k] for k in range(1, 16)) + a[0])}
+    sums = {
+        "x.sum(0)": jax.jit(lambda a: a.sum(0)),
+        "15 additions": jax.jit(lambda a: sum(a[k] for k in range(1, 16)) + a[0]),
+    }
     t = _time({k: (f, (x,)) for k, f in sums.items()}, args.repeats)
     print("sum over the leading axis of [16, 1664, 256]")
     for k in sums:
@@ -127,8 +132,12 @@ def _matmuls(repeats: int) -> None:
     except ImportError:
         return
     rng = np.random.default_rng(2)
-    shapes = {"encoder step [1664,96]@[96,256]": (1664, 96, 256), "encoder backward [1664,256]@[256,96]": (1664, 256, 96),
-              "decoder step [128,128]@[128,512]": (128, 128, 512), "6 modes [768,128]@[128,512]": (768, 128, 512)}
+    shapes = {
+        "encoder step [1664,96]@[96,256]": (1664, 96, 256),
+        "encoder backward [1664,256]@[256,96]": (1664, 256, 96),
+        "decoder step [128,128]@[128,512]": (128, 128, 512),
+        "6 modes [768,128]@[128,512]": (768, 128, 512),
+    }
     jobs = {}
     for name, (m, k, n) in shapes.items():
         a, b = (rng.normal(size=s).astype(np.float32) for s in ((m, k), (k, n)))
@@ -140,7 +149,8 @@ def _matmuls(repeats: int) -> None:
     for name, (m, k, n) in shapes.items():
         flop = 2 * m * k * n
         (xm, xn), (tm, tn) = t[(name, "xla")], t[(name, "torch")]
-        print(f"  {name:<36} xla {flop / xm / 1e9:6.0f} ({flop / xn / 1e9:4.0f})   torch {flop / tm / 1e9:6.0f} ({flop / tn / 1e9:4.0f})")
+        print(f"  {name:<36} xla {flop / xm / 1e9:6.0f} ({flop / xn / 1e9:4.0f})   "
+              f"torch {flop / tm / 1e9:6.0f} ({flop / tn / 1e9:4.0f})")
 
 
 if __name__ == "__main__":

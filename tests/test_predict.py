@@ -282,7 +282,12 @@ def test_lstm_hand_written_backward_matches_autodiff():
             xy,
             probe_last,
         ),
-        (lambda x, *p: lstm_repeat(t, x, *p), lambda x, *p: _textbook_lstm(jnp.broadcast_to(x, (t,) + x.shape), *p), x1, probe_all),
+        (
+            lambda x, *p: lstm_repeat(t, x, *p),
+            lambda x, *p: _textbook_lstm(jnp.broadcast_to(x, (t,) + x.shape), *p),
+            x1,
+            probe_all,
+        ),
     ]
     for case, (got_fn, want_fn, x, probe) in enumerate(cases):
         p = w + emb if case == 1 else w

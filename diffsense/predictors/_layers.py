@@ -14,7 +14,7 @@ import jax.numpy as jnp
 from flax import nnx
 from jaxtyping import Array, Float
 
-from diffsense.predictors._lstm import leaky_relu, lstm_last, lstm_repeat
+from diffsense.predictors._lstm import leaky_relu, lstm_last, lstm_repeat  # leaky_relu: re-exported
 
 
 def _uniform(rngs: nnx.Rngs, shape: tuple[int, ...], fan_in: int) -> jax.Array:
