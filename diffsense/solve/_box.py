@@ -281,7 +281,8 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
         names=names, bounds={n: (float(a), float(b)) for n, a, b in zip(names, lo, hi)},
         x_star=_named(names, x_star), J_star=float(j_star), E_hard=e_hard, E_soft=e_soft, cost=cost,
         gradient=_named(names, grad), gradient_E=_named(names, grad_e), on_bound=dict(zip(names, flags)),
-        source=source, starts=tuple(starts), counts={k: fns.counts[k] - counts0[k] for k in counts0}, history=tuple(fns.history[first:]),
+        source=source, starts=tuple(starts), counts={k: fns.counts[k] - counts0[k] for k in counts0},
+        history=tuple(fns.history[first:]),
         tau_schedule=tuple(float(t) for t in config.tau_schedule), cost_weight=float(lam))
 
 
