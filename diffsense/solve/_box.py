@@ -273,9 +273,9 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
         starts.append(StartResult(_named(names, points[i]), _named(names, x), j_soft, j_hard, tuple(steps)))
     j_star, source, x_star = min(candidates, key=lambda c: c[0])
     x_star, flags = box.snap(x_star)
-    j_soft, grad, e_soft = fns.j_soft(x_star, float(config.tau_schedule[-1]), lam)
+    _, grad, e_soft = fns.j_soft(x_star, float(config.tau_schedule[-1]), lam)
     _, e_hard, cost = fns.j_hard(x_star, lam)
-    e2, g2 = fns.e2_soft(x_star, float(config.tau_schedule[-1]))
+    _, g2 = fns.e2_soft(x_star, float(config.tau_schedule[-1]))
     grad_e = g2 / (2.0 * e_soft) if e_soft > 0 else np.zeros(d)
     return BoxResult(
         names=names, bounds={n: (float(a), float(b)) for n, a, b in zip(names, lo, hi)},
