@@ -20,7 +20,7 @@ from diffsense.metrics import PAPER_SCENARIOS, QUESTIONS, EstimatorConfig
 from diffsense.predictors import Predictor
 from diffsense.sensors import Sensor, make_sensor
 from diffsense.sensors._params import ParamSpec
-from diffsense.solve import SolveConfig
+from diffsense.solve import BoxConfig, SolveConfig
 from diffsense.tracks import FILL_POLICIES
 
 _MAX_SEED = 2**32 - 1
@@ -31,9 +31,11 @@ class Problem:
     """An optimisation problem: argmin over r in the box `params` of E(r).
 
     Attributes:
-        sensor: a registered sensor name ("radar", "camera") or a `diffsense.sensors.Sensor`.
+        sensor: a registered sensor name ("radar", "camera"), a `diffsense.sensors.Sensor`, or a
+            list of them: a suite, fused into one track per vehicle (`diffsense.sensors.Suite`).
         params: {name: (lo, hi)}: the free parameters and their bounds, in the units their names
-            carry ("hfov_deg": degrees). Short names ("hfov") are resolved to the sensor's.
+            carry ("hfov_deg": degrees). Short names ("hfov") are resolved to the sensor's; a
+            suite's are qualified by the member ("radar.hfov_deg", "camera.width").
         scenarios: scenario names or TOML paths.
         scenes: recorded traffic instead of scenarios: "highd:PATH" (a highD NN_tracks.csv, its
             two sibling files beside it) or "ngsim:PATH" (an NGSIM trajectory CSV); one scene per
@@ -61,10 +63,13 @@ class Problem:
         steps: the stepped sweep's points (one-parameter problems; None: the default steps).
         solve: settings of the continuous solve.
         dense_check: if set, `optimise` also evaluates E_hard every this many parameter units.
+        cost_weight: lambda in the objective E + lambda * cost [m per currency unit] (0: E alone).
+        costs: a cost-model TOML (None: configs/costs.toml).
+        box: settings of the many-parameter solve (`diffsense.solve.BoxConfig`).
         extra_curve_points: evenly spaced extra E(r) points evaluated for the objective figure.
     """
 
-    sensor: str | Sensor = "radar"
+    sensor: str | Sensor | Sequence[str | Sensor] = "radar"
     params: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=lambda: {"hfov_deg": (30.0, 180.0)})
     scenarios: Sequence[str] = PAPER_SCENARIOS
     scenes: str | None = None
@@ -85,10 +90,18 @@ class Problem:
     solve: SolveConfig = SolveConfig()
     dense_check: float | None = None
     extra_curve_points: int = 0
+    cost_weight: float = 0.0
+    costs: str | None = None
+    box: BoxConfig = BoxConfig()
 
     def __post_init__(self):
-        sensor = self.make_sensor()
         set_ = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731 (frozen)
+        if isinstance(self.sensor, list):
+            set_("sensor", tuple(self.sensor))
+        sensor = self.make_sensor()
+        set_("cost_weight", _finite(self.cost_weight, "cost_weight"))
+        if self.cost_weight < 0:
+            raise InputError(f"cost_weight must be >= 0, got {self.cost_weight:g}")
         if self.fill is None:
             set_("fill", "zero" if self.profile == "paper" else "hold")
         set_("params", _resolve_params(sensor, self.params))
@@ -126,6 +139,8 @@ class Problem:
             if len(self.params) != 1:
                 raise InputError("steps apply to one-parameter problems only")
             set_("steps", tuple(_finite(v, "steps") for v in self.steps))
+        if self.dense_check is not None and len(self.params) > 1:
+            raise InputError("dense_check applies to one-parameter problems only")
         if self.dense_check is not None and not (math.isfinite(self.dense_check) and self.dense_check > 0):
             raise InputError(f"dense_check must be a positive step, got {self.dense_check}")
         if self.dense_check is not None:
@@ -139,8 +154,9 @@ class Problem:
 
     @property
     def sensor_kind(self) -> str:
-        """The sensor's short name ("radar", "camera", or a custom sensor's)."""
-        return self.make_sensor().kind
+        """The sensor's short name ("radar", "camera", a custom sensor's; "radar+camera" for a suite)."""
+        sensor = self.make_sensor()
+        return "+".join(sensor.names) if hasattr(sensor, "members") else sensor.kind
 
     def specs(self) -> dict[str, ParamSpec]:
         """The spec (unit, domain, default) of every free parameter."""
@@ -192,11 +208,22 @@ def _finite(value: Any, what: str) -> float:
 def resolve_name(sensor: Sensor, name: str) -> str:
     """A parameter's full name from a full ("hfov_deg"), short ("hfov") or qualified
     ("radar.hfov_deg") one; InputError naming the known ones otherwise."""
+    specs = [s.name for s in sensor.param_specs()]
+    if name in specs:
+        return name
+    members = getattr(sensor, "members", None)
+    if members is not None:  # a suite: "member.param", the param resolved within the member
+        kind, dot, rest = name.partition(".")
+        if not dot:
+            raise InputError(f"a suite's parameters are qualified by the sensor: give e.g. "
+                             f"{', '.join(n + '.' + name for n in sensor.names)}")
+        if kind not in sensor.names:
+            raise InputError(f"parameter {name} names sensor {kind!r}, not in the suite ({', '.join(sensor.names)})")
+        return f"{kind}.{resolve_name(members[sensor.names.index(kind)], rest)}"
     if "." in name:
         kind, name = name.split(".", 1)
         if kind != sensor.kind:
             raise InputError(f"parameter {kind}.{name} names sensor {kind!r}, not in this problem ({sensor.kind})")
-    specs = [s.name for s in sensor.param_specs()]
     if name in specs:
         return name
     short = {s.rsplit("_", 1)[0]: s for s in specs}

@@ -38,6 +38,9 @@ result.json schema (every key always present; non-finite numbers are written as 
     "domain"        {"factor", "validation_rmse_m": [m at 1..5 s], "scenarios": {name: {"rmse_gt_m":
                              [...], "inside": bool}}, "outside": [names]}  the predictor's domain
                              check (`diffsense._domain`); a scenario outside it also gets a note
+    "box"           only for many parameters (or a cost): {"J_star", "cost", "cost_weight",
+                             "gradient" (dJ/dr per parameter at r*: what still matters),
+                             "gradient_E", "on_bound" (per parameter), "source", "counts"}
     "sensitivity"   {theta: {param: dr*/dtheta}} or null: how r* moves with each ODD parameter asked
                              for (`diffsense.sensitivity`; 0 on a bound)
     "scenarios"     [string, ...]
@@ -137,7 +140,7 @@ class Result:
     r_star: dict[str, float]
     E_hard_star: float
     E_soft_star: float
-    solve: SolveResult
+    solve: SolveResult | None
     programs_run: dict[str, dict[str, int]]
     wall_s: dict[str, float]
     scenarios: tuple[str, ...]
@@ -151,21 +154,28 @@ class Result:
     flags: tuple[str, ...] = ()
     domain: dict[str, Any] | None = None
     sensitivity: dict[str, dict[str, Any]] | None = None
+    box: Any = None
+    box_notes: tuple[str, ...] = ()
 
     @property
     def sweep(self):
-        return self.solve.sweep
+        return self.solve.sweep if self.solve is not None else ()
 
     @property
     def evaluations(self) -> dict[str, int]:
+        if self.solve is None:
+            return {"objective": self.box.counts["hard"], "gradient": self.box.counts["soft"]}
         return dict(self.solve.evaluations)
 
     @property
     def notes(self) -> tuple[str, ...]:
-        return self.solve.notes
+        return self.solve.notes if self.solve is not None else self.box_notes
 
     @property
     def on_bound(self) -> bool:
+        """r* is on a bound (one-parameter problems), or any parameter is (many parameters)."""
+        if self.solve is None:
+            return any(self.box.on_bound.values())
         return self.solve.on_bound
 
     @property
@@ -175,6 +185,8 @@ class Result:
 
     def to_json(self) -> dict[str, Any]:
         """The result.json content (module docstring), JSON-ready."""
+        if self.solve is None:
+            return self._box_json()
         name = self.param
         s = self.solve
         out = {
@@ -211,4 +223,27 @@ class Result:
         }
         if self.dense_check is not None:
             out["dense_check"] = self.dense_check
+        return plain(out)
+
+    def _box_json(self) -> dict[str, Any]:
+        """result.json of a many-parameter (box) solve: the same keys where they apply; "sweep",
+        "bracket" and the one-parameter keys are empty or null, and "box" holds the solve."""
+        b = self.box
+        out = {
+            "sensor": self.sensor, "params": {k: list(v) for k, v in self.params.items()}, "units": dict(self.units),
+            "param": None, "interval": None, "r_star": dict(self.r_star), "E_soft_star": self.E_soft_star,
+            "E_hard_star": self.E_hard_star, "sweep": [], "evaluations": self.evaluations,
+            "programs_run": self.programs_run, "wall_s": dict(self.wall_s), "on_bound": self.on_bound,
+            "bracket": None, "tau_schedule": list(b.tau_schedule), "notes": list(self.box_notes),
+            "objective": self.config.get("objective", "eq12"),
+            "by_scenario": (self.breakdown or {}).get("by_scenario"),
+            "by_horizon": (self.breakdown or {}).get("by_horizon"),
+            "coverage": (self.breakdown or {}).get("coverage"), "tracked": self.tracked,
+            "near_optimal": None, "flags": [f"{n}:on_{side}_bound" for n, side in b.on_bound.items() if side],
+            "domain": self.domain, "sensitivity": self.sensitivity, "scenarios": list(self.scenarios),
+            "config": self.config, "versions": versions(),
+            "box": {"J_star": b.J_star, "cost": b.cost, "cost_weight": b.cost_weight, "gradient": b.gradient,
+                    "gradient_E": b.gradient_E, "on_bound": b.on_bound, "source": b.source,
+                    "counts": b.counts},
+        }
         return plain(out)

@@ -19,7 +19,6 @@ from diffsense import cli as _cli
 from diffsense.cli._progress import Progress
 from diffsense.errors import InputError
 
-SENSOR_CHOICES = ("radar", "camera", "both")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -34,8 +33,13 @@ def _parser() -> argparse.ArgumentParser:
         "prediction error E_RMSE(r) (the paper's Eq. 12), cross-checked by the stepped sweep.",
     )
     p.add_argument("--config", help="TOML with keys of configs/optimise/default.toml (the rest keep their defaults)")
-    p.add_argument("--sensor", choices=SENSOR_CHOICES, help="sensor (both: radar and camera, compared)")
-    p.add_argument("--param", help="differentiable sensor parameter, e.g. hfov, range, tx_power, width")
+    p.add_argument("--sensor", help="radar, camera, both (each alone, compared) or a suite fused into one "
+                   "track per vehicle: radar,camera")
+    p.add_argument("--param", action="append", metavar="NAME[=LO:HI]",
+                   help="differentiable parameter, e.g. hfov, range, tx_power, width (with --interval); or, "
+                   "repeated, NAME=LO:HI for several at once (a suite's are qualified: radar.hfov_deg=20:120)")
+    p.add_argument("--cost-weight", type=float, metavar="LAMBDA",
+                   help="optimise E + LAMBDA * cost (configs/costs.toml) [m per currency unit]")
     p.add_argument("--interval", nargs=2, type=float, metavar=("LO", "HI"), help="interval of r (parameter units)")
     p.add_argument("--steps", help="comma-separated sweep steps (default: the paper's for hfov)")
     p.add_argument("--scenarios", help="comma-separated scenario names or TOML paths")
@@ -70,6 +74,26 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _param_boxes(params: list[str] | None) -> dict[str, tuple[float, float]]:
+    """{name: (lo, hi)} from repeated --param NAME=LO:HI ({} for the single-name form)."""
+    if not params or (len(params) == 1 and "=" not in params[0]):
+        return {}
+    boxes: dict[str, tuple[float, float]] = {}
+    for text in params:
+        name, eq, bounds = text.partition("=")
+        lo, colon, hi = bounds.partition(":")
+        if not (eq and colon and name.strip()):
+            raise InputError(f"--param {text!r}: give NAME=LO:HI when naming several parameters")
+        try:
+            pair = (float(lo), float(hi))
+        except ValueError:
+            raise InputError(f"--param {text!r}: LO and HI must be numbers") from None
+        if name.strip() in boxes:
+            raise InputError(f"parameter {name.strip()} is named twice")
+        boxes[name.strip()] = pair
+    return boxes
+
+
 def _number_list(text: str, what: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(",") if v.strip())
@@ -89,10 +113,28 @@ def problems(args: argparse.Namespace) -> list:
     from diffsense.solve import check_steps
 
     settings = load_settings(args.config)
-    sensors = ["radar", "camera"] if args.sensor == "both" else [args.sensor or settings.problem.sensor]
+    text = args.sensor or settings.problem.sensor
+    if text == "both":
+        sensors = ["radar", "camera"]
+    elif "," in text:
+        sensors = [tuple(s.strip() for s in text.split(",") if s.strip())]
+    else:
+        sensors = [text]
+    boxes = _param_boxes(args.param)
+    if boxes and args.interval:
+        raise InputError("--param NAME=LO:HI carries its bounds: give no --interval with it")
+    single = None if boxes or not args.param else args.param[0]
     out = []
     for sensor in sensors:
-        fields = problem_fields(settings, sensor, args.param, tuple(args.interval) if args.interval else None)
+        if boxes or isinstance(sensor, tuple):
+            fields = problem_fields(settings, "radar", None, (30.0, 180.0))  # every other key from the config
+            fields.update(sensor=sensor, params=boxes or {})
+            if not boxes:
+                raise InputError("a suite needs its parameters as --param NAME=LO:HI (e.g. radar.hfov_deg=20:120)")
+        else:
+            fields = problem_fields(settings, sensor, single, tuple(args.interval) if args.interval else None)
+        if args.cost_weight is not None:
+            fields["cost_weight"] = args.cost_weight
         if args.scenarios is not None:
             fields["scenarios"] = args.scenarios
         if args.scenes is not None:
@@ -122,8 +164,8 @@ def problems(args: argparse.Namespace) -> list:
         if weather:
             fields["weather"] = weather
         problem = Problem(**fields)
-        (lo, hi), = problem.params.values()
         if problem.steps is not None:
+            (lo, hi), = problem.params.values()
             check_steps(problem.steps, lo, hi)
         out.append(problem)
     return out
@@ -208,7 +250,10 @@ def main(argv: list[str] | None = None) -> int:
             write_bytes(staging / "comparison.txt", (table + "\n").encode())
     progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if len(results) > 1 else ""))
     for content in results.values():
-        print("\n" + report.summary_table(content, unit=content["units"][content["param"]]))
+        if content["param"] is None:
+            print("\n" + report.box_table(content))
+        else:
+            print("\n" + report.summary_table(content, unit=content["units"][content["param"]]))
         print(report.breakdown_table(content))
     if len(results) > 1:
         print("\nradar versus camera\n" + table)

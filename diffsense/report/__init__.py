@@ -13,12 +13,13 @@ Everything is written atomically (diffsense._io).
 from diffsense._timing import CompileClock
 from diffsense.report._figures import plot_detection_timeline, plot_objective, plot_rmse_horizon
 from diffsense.report._run import RUN_FILES, write_run
-from diffsense.report._tables import breakdown_table, comparison_table, format_table, summary_table
+from diffsense.report._tables import box_table, breakdown_table, comparison_table, format_table, summary_table
 
 __all__ = [
     "CompileClock",
     "RUN_FILES",
     "write_run",
+    "box_table",
     "breakdown_table",
     "comparison_table",
     "format_table",

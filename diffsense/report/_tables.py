@@ -136,3 +136,17 @@ def breakdown_table(result: Mapping[str, Any]) -> str:
         lines.append(f"tracked question: E over tracked instants {_cell(t['E_tracked'])} m, "
                      f"missed share {t['missed_share']:.1%}, J {_cell(t['J_m2'])} m^2")
     return "\n".join(lines)
+
+
+def box_table(result: Mapping[str, Any]) -> str:
+    """The printed summary of a many-parameter solve: r*, what still matters (dJ/dr) and bounds."""
+    box = result["box"]
+    rows = [[name, value, result["units"][name], box["gradient"][name], box["on_bound"][name] or "interior"]
+            for name, value in result["r_star"].items()]
+    lines = [f"{result['sensor']}: {len(rows)} parameters, J = E + {box['cost_weight']:g} x cost",
+             format_table(["parameter", "r*", "unit", "dJ/dr at r*", ""], rows),
+             f"E_hard(r*) {_cell(result['E_hard_star'])} m, E_soft {_cell(result['E_soft_star'])} m, "
+             f"cost {_cell(box['cost'])}, J {_cell(box['J_star'])} ({box['source']}); "
+             f"{box['counts'].get('soft', 0)} value-and-gradient + {box['counts'].get('hard', 0)} hard evaluations"]
+    lines += [f"note: {n}" for n in result.get("notes", [])]
+    return "\n".join(lines)

@@ -37,6 +37,7 @@ from diffsense.sensors._params import (
 )
 from diffsense.sensors._sensor import Sensor, make_sensor, register, sensor_names
 from diffsense.sensors._weather import CLEAR, Weather
+from diffsense.sensors._fusion import Suite
 from diffsense.sensors._suite import Camera, Radar
 from diffsense.sensors._radar import (
     radar_detect,
@@ -47,7 +48,7 @@ from diffsense.sensors._radar import (
 )
 
 __all__ = [
-    "CLEAR", "Camera", "Radar", "Sensor", "Weather", "make_sensor", "register", "sensor_names",
+    "CLEAR", "Camera", "Radar", "Sensor", "Suite", "Weather", "make_sensor", "register", "sensor_names",
     "MODES", "SENSORS", "CameraConfig", "CameraParams", "CameraTemperatures", "Detections",
     "ParamSpec", "RadarConfig", "RadarParams", "RadarTemperatures", "camera_depth_sigma_m",
     "camera_detect", "camera_p_detect", "camera_px_per_rad", "check_params", "detect",

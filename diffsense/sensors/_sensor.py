@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -103,9 +103,19 @@ def sensor_names() -> tuple[str, ...]:
     return tuple(_REGISTRY)
 
 
-def make_sensor(sensor: str | Sensor, config: str | None = None, profile: str = "physical") -> Sensor:
+def make_sensor(sensor: str | Sensor | Sequence[str | Sensor], config: str | None = None,
+                profile: str = "physical") -> Sensor:
     """The registered sensor `name` of `profile`, with the constants of the TOML at `config`
-    replacing the profile's (a Sensor is returned as is, and then takes neither)."""
+    replacing the profile's (a Sensor is returned as is, and then takes neither). A sequence of
+    them is a `Suite` (fused; parameters named "radar.hfov_deg"); a suite takes no `config`."""
+    if isinstance(sensor, (list, tuple)):
+        from diffsense.sensors._fusion import Suite
+
+        if config is not None:
+            raise InputError("a sensor config applies to one sensor: give a suite's members as Sensor objects instead")
+        if len(sensor) == 1:
+            return make_sensor(sensor[0], None, profile)
+        return Suite([make_sensor(s, None, profile) for s in sensor])
     if isinstance(sensor, Sensor):
         if config is not None or profile != "physical":
             raise InputError("a Sensor object carries its own constants: give no sensor config or profile with it")

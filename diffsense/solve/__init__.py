@@ -14,6 +14,8 @@ sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, 
 """
 
 from diffsense.solve._bracketed import BracketedSecant
+from diffsense.solve._box import BoxConfig, BoxResult, box_solve, pareto_sweep
+from diffsense.solve._box_fns import BoxFunctions
 from diffsense.solve._evaluator import Evaluator
 from diffsense.solve._continuous import LevelResult, SolveConfig, SolveResult, solve
 from diffsense.solve._dense import DenseGrid, basin_check, dense_grid_search
@@ -32,6 +34,9 @@ from diffsense.solve._steps import (
 
 __all__ = [
     "PAPER_HFOV_STEPS_DEG",
+    "BoxConfig",
+    "BoxFunctions",
+    "BoxResult",
     "BracketedSecant",
     "DenseGrid",
     "Evaluator",
@@ -42,6 +47,8 @@ __all__ = [
     "argmin",
     "argmin_derivative",
     "basin_check",
+    "box_solve",
+    "pareto_sweep",
     "best_step",
     "bracket_around",
     "check_interval",
