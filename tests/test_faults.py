@@ -159,3 +159,46 @@ def test_an_interrupted_training_set_leaves_no_partial_folder(tmp_path):
     assert proc.wait(timeout=120) == 130
     assert proc.stderr.read().strip().splitlines()[-1] == "interrupted"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_deflate_bomb_is_refused_in_bounded_memory(tmp_path):
+    import zipfile
+
+    bomb = tmp_path / "bomb.tar"
+    _torch_zip.write(bomb, {"w": np.ones((4, 4), np.float32)})
+    with zipfile.ZipFile(bomb, "a", compression=zipfile.ZIP_DEFLATED) as z, \
+            z.open("archive/data/1", "w", force_zip64=True) as f:
+        chunk = bytes(1 << 20)
+        for _ in range(1024):  # 1 GiB of zeros, ~1 MB on disk
+            f.write(chunk)
+
+    def cap():
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 29, 3 << 29))
+
+    proc = _cli(["--model", str(bomb), "--out", str(tmp_path / "o")], preexec_fn=cap)
+    assert proc.returncode == 2 and proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr, proc.stderr
+    assert str(bomb) in proc.stderr
+
+
+def test_outputs_get_the_umask_mode(tmp_path):
+    out = tmp_path / "sc01.png"
+    proc = subprocess.run([sys.executable, "-c", "import os; os.umask(0o027); import runpy, sys; "
+                           f"sys.argv = ['diffsense.scene', 'show', 'sc01', '--out', {str(out)!r}]; "
+                           "runpy.run_module('diffsense.scene', run_name='__main__')"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert out.stat().st_mode & 0o777 == 0o640
+
+
+@pytest.mark.slow
+def test_a_flat_range_objective_says_so(tmp_path):
+    out = tmp_path / "range"
+    proc = _cli(["--scenarios", "sc01", "--variants", "1", "--param", "range", "--interval", "0.1", "1000",
+                 "--out", str(out), "--quiet"], timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads((out / "result.json").read_text())
+    r = result["r_star"]["range_m"]
+    holding = [iv for iv in result["near_optimal"]["intervals"] if iv[0] <= r <= iv[1]]
+    assert len(holding) == 1
+    flat = holding[0][1] - holding[0][0] >= 0.1 * (1000 - 0.1)
+    assert ("flat" in result["flags"]) == flat and ("flat around r*" in proc.stdout) == flat

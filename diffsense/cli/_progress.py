@@ -1,7 +1,7 @@
 """Progress a person can follow: stage lines, evaluations with the current E and an ETA.
 
 On a terminal the evaluations are one progress bar (tqdm); otherwise one plain line each, so a
-log shows them too; nothing under --quiet. Once the first evaluations have been timed, a run
+log shows them too; nothing under --quiet but the estimate. Once the first evaluations have been timed, a run
 predicted to take more than a minute says so, with its estimate (evaluations left x the median
 time of an evaluation after the first of each kind, which includes compiling).
 """
@@ -41,14 +41,15 @@ class Progress:
             self._times.append(now - self._last)
         self._kinds.add(event["kind"])
         self._last = now
-        if self.quiet:
-            return
         done, planned = event["done"], max(event["planned"], event["done"])
         eta = statistics.median(self._times) * (planned - done) if self._times else None
         if eta is not None and eta > LONG_RUN_S and not self._warned:
-            self._warned = True
-            self(f"estimate: {planned - done} evaluations left x {statistics.median(self._times):.1f} s "
-                 f"= about {eta / 60:.1f} min")
+            self._warned = True  # said even under --quiet: a long run should never be silent
+            self._close_bar()
+            print(f"[{now - self.t0:6.1f} s] estimate: {planned - done} evaluations left x "
+                  f"{statistics.median(self._times):.1f} s = about {eta / 60:.1f} min", file=self.stream, flush=True)
+        if self.quiet:
+            return
         text = f"E {event['kind']} = {event['E_m']:.4f} m" + (f", ETA {eta:.0f} s" if eta is not None else "")
         if self.stream.isatty():
             if self._bar is None:
