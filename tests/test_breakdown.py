@@ -100,5 +100,7 @@ def test_tracked_question_is_finite_at_the_extremes(r):
 def test_tracked_differs_from_eq12_only_by_its_question():
     eq12 = toy_objective(n=2, instants=4, fill="zero")
     tracked = toy_objective(n=2, instants=4, fill="zero", question="tracked", miss_penalty_m2=0.0)
-    far = {R: 1000.0}  # every instant tracked: both questions ask the same
-    np.testing.assert_allclose(float(tracked(far, mode="hard")), float(eq12(far, mode="hard")), rtol=1e-12)
+    far = {R: 1000.0}  # every one of the 2 x 4 instants tracked: both ask the same question, but
+    # "tracked" divides by its 8 instants plus the one pseudo-instant of zero error.
+    np.testing.assert_allclose(float(tracked(far, mode="hard")) ** 2, float(eq12(far, mode="hard")) ** 2 * 8 / 9,
+                               rtol=1e-12)
