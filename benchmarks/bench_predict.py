@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense.predictors import (
+    init_predictor,
     CSLSTMPredictor,
     load_predictor,
     predict_mean,
@@ -41,7 +42,6 @@ from diffsense.predictors import (
     si_to_model,
     state_dict_from_model,
 )
-from diffsense.predictors._model import new_model
 
 OPS = {  # row key -> label
     "forward": "forward",
@@ -123,7 +123,7 @@ def main() -> None:
     if args.checkpoint:
         predictors = [load_predictor(args.checkpoint)]
     else:
-        predictors = [CSLSTMPredictor.from_model(new_model(m, seed=0)) for m in (False, True)]
+        predictors = [init_predictor(maneuvers=m, seed=0) for m in (False, True)]
     load0 = os.getloadavg()
     print(f"CS-LSTM, B = {args.batch}, {args.neighbours} neighbours per target, float32, CPU "
           f"({os.cpu_count()} cores); median of {args.repeats} interleaved rounds; "

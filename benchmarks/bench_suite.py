@@ -42,14 +42,11 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
-from diffsense.metrics import make_objective, simulate_scenes  # noqa: E402
-from diffsense.metrics._cost import load_costs, make_cost  # noqa: E402
+from diffsense.metrics import load_costs, make_cost, make_objective, simulate_scenes  # noqa: E402
 from diffsense.predictors import load_predictor  # noqa: E402
-from diffsense.sensors import Camera, Radar  # noqa: E402
-from diffsense.sensors._fusion import Suite  # noqa: E402
+from diffsense.sensors import Camera, Radar, Suite  # noqa: E402
 import equinox as eqx  # noqa: E402
-from diffsense.solve._box import BoxConfig, box_solve  # noqa: E402
-from diffsense.solve._box_fns import BoxFunctions  # noqa: E402
+from diffsense.solve import BoxConfig, BoxFunctions, box_solve  # noqa: E402
 from diffsense.tracks import prediction_frames  # noqa: E402
 
 PAIR = {  # one radar + camera pair's eight parameters and their boxes
