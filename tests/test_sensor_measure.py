@@ -1,0 +1,72 @@
+"""The measurement chain of `detect`, pinned (from the sensors' mutation survivors): how the
+draws enter (measured = true + sigma * draw), their dtype, a vehicle at the sensor itself,
+input checks, and hard mode all the way down to the occlusion comparisons."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from test_sensor_scenes import make_scene
+
+from diffsense import config as cfg
+from diffsense import sensors as sensor
+from diffsense.errors import InputError
+
+CAMERA = sensor.load_config("camera")
+RADAR = sensor.load_config("radar")
+KEY = jax.random.key(2, impl="rbg")
+detect = jax.jit(sensor.detect, static_argnames=("config", "mode"))
+
+
+def test_measured_range_is_true_plus_sigma_times_the_draw():
+    # Camera at 30 deg, a car 30 m ahead: sigma_Z = 900 * 0.5 / (2444.62 * 0.12) = 1.533981 m.
+    # Draws (range, azimuth) = (+1, 0): measured 31.533981 m straight ahead; (-2, 0): 26.932038.
+    scene = make_scene([[0.0, CAMERA.mount_x_m + 30.0]] * 2, [[0.0, 0.0]] * 2)
+    draws = jnp.zeros((2, 2, 2)).at[0, :, 1].set(jnp.array([1.0, -2.0]))
+    det = detect(scene, CAMERA.params, CAMERA, draws)
+    np.testing.assert_allclose(np.asarray(det.x_m)[:, 1] - CAMERA.mount_x_m, [31.533981, 26.932038],
+                               atol=1e-6)
+    np.testing.assert_allclose(np.asarray(det.y_m)[:, 1], 0.0, atol=1e-12)
+
+
+def test_draws_have_the_scene_dtype_and_float32_draws_are_accepted():
+    one = make_scene([[0.0, 40.0]] * 3, [[0.0, 2.0]] * 3, dtype=np.float32)
+    batch = jax.tree.map(lambda a: jnp.stack([a, a]), one)
+    assert sensor.measurement_noise(KEY, one).dtype == np.float32
+    assert sensor.measurement_noise(KEY, batch).dtype == np.float32
+    for draws in (jnp.ones((2, 3, 2), jnp.float32), jnp.ones((2, 3, 2), jnp.float64)):
+        det = detect(one, CAMERA.params, CAMERA, draws)  # float64 draws are cast to the scene's
+        assert det.x_m.dtype == np.float32 and det.p_detect.dtype == np.float32
+
+
+def test_a_vehicle_at_the_sensor_or_beside_it_is_measured_where_it_is():
+    # Noise-free camera: vehicle 1 sits exactly at the sensor, vehicle 2 half a metre to its left.
+    config = cfg.replace(CAMERA, disparity_error_px=0.0, bearing_error_px=0.0)
+    x = [[0.0, config.mount_x_m, config.mount_x_m]]
+    scene = make_scene(x, [[0.0, 0.0, 0.5]], length_m=[4.5, 0.2, 0.2], width_m=[1.8, 0.2, 0.2])
+    det = detect(scene, config.params, config, KEY)
+    np.testing.assert_allclose(np.asarray(det.x_m), np.asarray(scene.x_m), atol=1e-12)
+    np.testing.assert_allclose(np.asarray(det.y_m), np.asarray(scene.y_m), atol=1e-12)
+
+
+def test_detect_checks_its_temperature_like_p_detect():
+    scene = make_scene([[0.0, 40.0]], [[0.0, 0.0]])
+    for bad in (0.0, -1.0):
+        with pytest.raises(InputError, match="temperature must be a positive number"):
+            sensor.detect(scene, CAMERA.params, CAMERA, KEY, temperature=bad)
+
+
+@pytest.mark.parametrize("config", [CAMERA, RADAR], ids=["camera", "radar"])
+def test_hard_detect_compares_ranges_hard(config):
+    # An occluder only 0.5 m nearer than the car it covers by 45 %: hard "nearer" is 1 (covered
+    # 45 %: the camera misses the car; the radar loses 15 dB * 0.45), while a soft comparison
+    # (sigmoid(0.5 / 1 m) = 0.62) would count only 28 %. detect's hard p must equal p_detect's.
+    s0 = config.mount_x_m + 30.0
+    scene = make_scene([[0.0, s0 - 0.5, s0]], [[0.0, 1.8 * 0.55, 0.0]])
+    params = sensor.make_params(config, hfov_deg=60.0)
+    hard = np.asarray(sensor.p_detect(scene, params, config, mode="hard"))
+    np.testing.assert_array_equal(np.asarray(detect(scene, params, config, KEY, mode="hard").p_detect), hard)
+    if config is CAMERA:
+        assert hard[0, 2] == 0.0
