@@ -170,3 +170,64 @@ def test_dense_grid_finds_a_narrow_dip_and_its_side_nearest_the_bowl():
     dense = dense_grid_search(eh, (LO, HI), 0.5 * DEG)
     assert dense.r[dense.best_index] == pytest.approx(85.5 * DEG, abs=1e-12)
     assert dense.E_hard.min() == pytest.approx(np.sqrt(1.0 + (85.5 * DEG - 1.3) ** 2))
+
+
+# --- the bisection's walk, step by step -------------------------------------------------------
+# Interval (0, 1), steps 0, 0.5, 1 (bracket (0, 1) around the best step 0.5), one level with
+# tol = xtol_rel = 1/128 (every number below is exact in binary): the walk from 0.5 probes
+# 0.5 + tol * (1, 3, 7, 15, 31, 63) = 0.5078125, 0.5234375, 0.5546875, 0.6171875, 0.7421875,
+# 0.9921875, then 1.0 (clipped); the level may spend max_evaluations - 2 gradient evaluations.
+def _walk(center, max_evaluations):
+    e2, _ = bowl(center)
+    _, eh = bowl(0.5)  # the hard objective makes 0.5 the best step
+    cfg = SolveConfig(method="bisection", tau_schedule=(1.0,), xtol_rel=1 / 128, hard_polish=0,
+                      max_evaluations=max_evaluations)
+    res = solve(e2, eh, (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
+    assert res.bracket == (0.0, 1.0)
+    return res.levels[0]
+
+
+def test_bisection_walk_stops_at_its_budget_share():
+    # Minimum at 0.6; 4 evaluations: g(0.5) and three probes, no sign change yet.
+    level = _walk(0.6, max_evaluations=6)
+    assert level.gradient_evaluations == 4 and not level.converged
+    assert level.r == 0.5546875 and level.bound == 0
+
+
+def test_bisection_walk_reaching_the_bound_with_its_last_probe():
+    # Minimum beyond 1: with 8 evaluations the seventh probe is the bracket's end, still downhill.
+    level = _walk(2.0, max_evaluations=10)
+    assert level.gradient_evaluations == 8 and level.converged
+    assert level.r == 1.0 and level.bound == 1
+
+
+def test_bisection_walk_then_halving():
+    # Minimum at 0.6: the sign changes between 0.5546875 and 0.6171875 (8 tol wide). Four
+    # halvings probe 0.5859375 (-), 0.6015625 (+), 0.59375 (-), 0.59765625 (-) and leave
+    # [0.59765625, 0.6015625] (tol / 2 wide), whose midpoint is the answer.
+    level = _walk(0.6, max_evaluations=12)
+    assert level.gradient_evaluations == 1 + 4 + 4 and level.converged
+    assert level.r == 0.599609375 and level.bound == 0
+
+
+def test_bisection_stops_at_a_zero_gradient():
+    # Centre exactly on the 90-deg step: dE^2/dr = 0 at the warm start, one evaluation a level.
+    center = float(np.deg2rad(90.0))
+    e2, eh = bowl(center)
+    res = solve(e2, eh, (LO, HI), config=SolveConfig(method="bisection"))
+    assert [(lv.r, lv.gradient_evaluations, lv.bound) for lv in res.levels] == [(center, 1, 0)] * 3
+
+
+def test_bisection_on_a_steep_bowl_keeps_to_its_budget():
+    # E^2 = 1 + 1e4 (r - 1.3)^2: the gradient is far from small over the last bracket, yet the
+    # halving count (not |dE^2/dr|) decides when the bisection stops.
+    def e2(r, tau):
+        del tau
+        return 1.0 + 1e4 * (r - 1.3) ** 2
+
+    res = solve(e2, lambda r: jnp.sqrt(e2(r, 1.0)), (LO, HI), config=SolveConfig(method="bisection"))
+    assert abs(res.r_star - 1.3) <= XTOL and _used(res) <= BUDGET and res.notes == ()
+    # the same evaluations as on the shallow bowl: 11 for the first level (walk 5 + halve 5 + 1),
+    # then 2 and 3 (bisection does not care how steep)
+    assert [lv.gradient_evaluations for lv in res.levels] == [11, 2, 3]
+    assert all(abs(lv.r - 1.3) <= XTOL * lv.tau and lv.converged for lv in res.levels)

@@ -67,3 +67,14 @@ def test_basin_check_reasons():
     assert basin_check(two, 1.49) is None and basin_check(two, 1.51) is not None
     one = DenseGrid(r=np.array([1.0]), E_hard=np.array([1.0]), evaluations=1, wall_s=0.0)
     assert basin_check(one, 1.0) is None and basin_check(one, 1.001) is not None
+
+
+def test_solve_result_to_dict_is_plain_and_complete():
+    import json
+
+    _, eh = bowl(1.3)
+    res = hard_grid_solve(eh, (LO, HI), max_evaluations=3)
+    d = res.to_dict()
+    assert d["r_star"] == res.r_star and d["evaluations"] == {"objective": 3, "gradient": 0}
+    assert [p["r"] for p in d["sweep"]] == [p.r for p in res.sweep]
+    json.dumps(d)  # JSON-ready
