@@ -35,6 +35,7 @@ def test_interior_minimum_of_a_bowl(method, center):
     assert abs(res.r_star - center) <= XTOL, res
     assert res.E_hard_star == pytest.approx(1.0, abs=1e-5)  # sqrt(1 + xtol^2) - 1 < 4e-6
     assert not res.on_bound and _used(res) <= BUDGET
+    assert sum(lv.gradient_evaluations for lv in res.levels) == res.evaluations["gradient"]
     for level in res.levels:
         assert abs(level.r - center) <= XTOL * level.tau, level
         assert level.bound == 0 and level.converged
@@ -94,6 +95,7 @@ def test_ripple_continuation_lands_in_the_best_basin(method, budget):
     a, b = dense.basin()
     res = solve(e2, eh, (LO, HI), config=SolveConfig(method=method, max_evaluations=budget))
     assert a <= res.r_star <= b and _used(res) <= budget
+    assert sum(lv.gradient_evaluations for lv in res.levels) == res.evaluations["gradient"]
     if method == "secant" or budget == 30:
         assert res.E_hard_star <= dense.E_hard.min() + 1e-4
         assert all(level.converged for level in res.levels)
@@ -208,6 +210,34 @@ def test_bisection_walk_then_halving():
     level = _walk(0.6, max_evaluations=12)
     assert level.gradient_evaluations == 1 + 4 + 4 and level.converged
     assert level.r == 0.599609375 and level.bound == 0
+
+
+def test_bisection_halving_capped_by_the_budget():
+    # As above with 7 evaluations: the walk's 5 leave 2 halvings, 0.5859375 (-) and 0.6015625
+    # (+): the answer is the midpoint of [0.5859375, 0.6015625], not converged.
+    level = _walk(0.6, max_evaluations=9)
+    assert level.gradient_evaluations == 7 and not level.converged
+    assert level.r == 0.59375
+
+
+def test_bisection_first_probe_brackets_a_tol_wide_interval():
+    # Minimum at 0.505: the first probe 0.5078125 is past it: [0.5, 0.5078125] is exactly tol
+    # wide, not narrower, so one halving (0.50390625, -) follows: answer 0.505859375.
+    level = _walk(0.505, max_evaluations=12)
+    assert level.gradient_evaluations == 3 and level.converged
+    assert level.r == 0.505859375
+
+
+def test_bisection_bracket_narrower_than_tol_needs_no_halving():
+    # Steps 0, 1 - tol/4, 1 (best: 1 - tol/4 = 0.998046875), minimum at 0.999: the first probe is
+    # clipped to 1.0, the bracket is tol / 4 wide: its midpoint 0.9990234375 is the answer.
+    e2, _ = bowl(0.999)
+    _, eh = bowl(0.998046875)
+    cfg = SolveConfig(method="bisection", tau_schedule=(1.0,), xtol_rel=1 / 128, hard_polish=0)
+    res = solve(e2, eh, (0.0, 1.0), steps=[0.0, 0.998046875, 1.0], config=cfg)
+    level = res.levels[0]
+    assert level.gradient_evaluations == 2 and level.converged
+    assert level.r == 0.9990234375 and level.bound == 0
 
 
 def test_bisection_stops_at_a_zero_gradient():
