@@ -70,3 +70,32 @@ def test_hard_detect_compares_ranges_hard(config):
     np.testing.assert_array_equal(np.asarray(detect(scene, params, config, KEY, mode="hard").p_detect), hard)
     if config is CAMERA:
         assert hard[0, 2] == 0.0
+
+
+def test_paper_profile_accuracy_is_table_ii_at_every_hfov():
+    # accuracy_follows_hfov off (the paper profile): the accuracy uses Table II's focal length
+    # 2400 px whatever the HFOV: sigma_Z(50 m) = 2500 * 0.5 / (2400 * 0.12) = 4.340278 m, bearing
+    # 0.5 / 2400 rad; with the lens's k at 120 deg (611.15 px/rad) it would be 17.0442 m.
+    paper = cfg.replace(CAMERA, accuracy_follows_hfov=False)
+    for hfov in (30.0, 120.0):
+        params = sensor.make_params(paper, hfov_deg=hfov)
+        sigma = float(sensor.camera_depth_sigma_m(jnp.asarray(50.0), params, paper))
+        assert sigma == pytest.approx(4.340278, rel=1e-6)
+    # float32 parameters and scene: the focal length does not promote the output to float64
+    params32 = jax.tree.map(lambda v: jnp.float32(v), sensor.make_params(paper, hfov_deg=120.0))
+    scene32 = make_scene([[0.0, paper.mount_x_m + 50.0]], [[0.0, 0.0]], dtype=np.float32)
+    draws = jnp.zeros((2, 1, 2), jnp.float32).at[1, 0, 1].set(1.0)  # one bearing sigma
+    det = detect(scene32, params32, paper, draws)
+    assert det.x_m.dtype == np.float32
+    bearing = float(jnp.arctan2(det.y_m[0, 1], det.x_m[0, 1] - paper.mount_x_m))
+    assert bearing == pytest.approx(0.5 / 2400, rel=1e-4)
+
+
+@pytest.mark.parametrize("mode", ["soft", "hard"])
+def test_padding_slots_hide_nothing_and_hard_output_keeps_float32(mode):
+    # A padding slot (present False) parked 20 m ahead, in line with a car at 40 m.
+    scene = make_scene([[0.0, 40.0, 20.0]], [[0.0, 0.0, 0.0]], present=[True, True, False],
+                       dtype=np.float32)
+    p = sensor.p_detect(scene, CAMERA.params, CAMERA, mode=mode)
+    assert p.dtype == np.float32
+    assert float(p[0, 1]) > 0.99 and float(p[0, 2]) == 0.0
