@@ -113,6 +113,10 @@ def test_polish_lands_in_a_dip_narrower_than_the_soft_objective(method, reserve)
     assert abs(res.r_star - 1.33) <= 0.01 and _used(res) <= BUDGET
     assert res.E_hard_star == pytest.approx(np.sqrt(1.0 + (res.r_star - 1.3) ** 2))
     assert any(n.startswith("hard polish") for n in res.notes)
+    # the compass search's third probe (+w/32) is the one taken; its next three do not improve
+    width = res.bracket[1] - res.bracket[0]
+    assert res.r_star - res.levels[-1].r == pytest.approx(width / 32, abs=1e-12)
+    assert res.evaluations["objective"] == 1 + 6 + 1  # E_hard(r_soft), 6 probes, E_soft(r*)
 
 
 @pytest.mark.parametrize("method", METHODS)

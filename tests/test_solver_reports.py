@@ -78,3 +78,34 @@ def test_solve_result_to_dict_is_plain_and_complete():
     assert d["r_star"] == res.r_star and d["evaluations"] == {"objective": 3, "gradient": 0}
     assert [p["r"] for p in d["sweep"]] == [p.r for p in res.sweep]
     json.dumps(d)  # JSON-ready
+
+
+def test_solve_config_edges():
+    from diffsense.errors import InputError
+    from diffsense.solve import SolveConfig
+
+    SolveConfig(tau_schedule=(2.0, 2.0, 1.0))  # equal temperatures may repeat
+    SolveConfig(xtol_rel=0.49)
+    with pytest.raises(InputError, match="xtol_rel"):
+        SolveConfig(xtol_rel=0.5)
+    # The least budget of 3 levels: 1 gradient + 3 reserved for each later level + the final
+    # hard and soft evaluations = 1 + 6 + 2 = 9; with the 6 polish evaluations reserved, 15.
+    SolveConfig(max_evaluations=9)
+    with pytest.raises(InputError, match="need at least 9"):
+        SolveConfig(max_evaluations=8)
+    SolveConfig(max_evaluations=15, reserve_polish=True)
+    with pytest.raises(InputError, match="need at least 15"):
+        SolveConfig(max_evaluations=14, reserve_polish=True)
+
+
+def test_soft_e_below_one_metre_is_its_square_root():
+    # E^2 = 0.25 + (r - 1.3)^2: E_soft at the answer is 0.5 m (the square root is floored at 0,
+    # not at 1).
+    from diffsense.solve import solve
+
+    def e2(r, tau):
+        del tau
+        return 0.25 + (r - 1.3) ** 2
+
+    res = solve(e2, lambda r: math.sqrt(0.25 + (float(r) - 1.3) ** 2), (LO, HI))
+    assert res.E_soft_star == pytest.approx(0.5, abs=1e-5)
