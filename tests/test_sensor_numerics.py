@@ -193,3 +193,30 @@ def test_float32_scenes_stay_float32(name):
     det = jax.jit(sensor.detect, static_argnames=("config", "mode"))(
         scene, config.params, config, jax.random.key(0, impl="rbg"))
     assert {det.p_detect.dtype, det.x_m.dtype, det.y_m.dtype} == {np.dtype(np.float32)}
+
+
+@pytest.mark.parametrize("turn", [0.2, math.pi - 0.02, -2.5])
+def test_occluded_fraction_depends_on_azimuth_differences_only(turn):
+    # The scene of the test above (occluder 2 this time) turned by `turn`: the same fractions.
+    # Turned by pi - 0.02, occluder 2 lands at -pi + 0.03 and the car it covers at pi - 0.02.
+    r = jnp.array([[50.0], [20.0], [20.0], [80.0]])
+    az = jnp.array([[0.0], [-0.05], [0.05], [0.0]])
+    half = jnp.array([[0.1], [0.09], [0.09], [0.5]])
+    occ = jnp.array([[True], [False], [True], [True]])
+    base = np.asarray(occluded_fraction(r, az, half, occ, "hard", 1.0, 0.01))
+    turned = np.asarray(occluded_fraction(r, geo.wrap_angle(az + turn), half, occ, "hard", 1.0, 0.01))
+    np.testing.assert_allclose(turned, base, atol=1e-12)
+    np.testing.assert_allclose(base[:, 0], [0.7, 0.0, 0.0, 0.38], atol=1e-12)
+
+
+def test_a_zero_width_vehicle_is_not_occluded_and_has_a_finite_gradient():
+    r = jnp.array([[50.0], [20.0]])
+    az = jnp.array([[0.0], [0.0]])
+    occ = jnp.array([[True], [True]])
+
+    def frac(h0):
+        half = jnp.array([[0.0], [0.1]]).at[0, 0].set(h0)
+        return occluded_fraction(r, az, half, occ, "soft", 1.0, 0.01)[0, 0]
+
+    assert float(frac(0.0)) == 0.0
+    assert np.isfinite(float(jax.grad(frac)(0.0)))
