@@ -8,6 +8,10 @@ p = gate(FOV) gate(range) gate(width_px - min) gate(visible - 0.6).
 Measurements: depth along the ray with sigma_Z = Z^2 disparity_error / (k baseline) and bearing
 with sigma = bearing_error_px / k. Fog and rain (`Weather`) cap the range at Koschmieder's
 contrast range.
+
+With `[detection] law = "confidence"` (`_laws.py`) the gates give way to the physical probability
+that the detector's noisy confidence clears its threshold, the confidence's mean growing with
+the object's width in pixels and its visible fraction (inside the image and unhidden).
 """
 
 from __future__ import annotations
@@ -19,6 +23,13 @@ from diffsense.scene import Scene
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
+from diffsense.sensors._laws import (
+    LogProbability,
+    confidence_mean,
+    in_fov_fraction,
+    log_confidence_above,
+    log_reported_below,
+)
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensors._params import CameraConfig, CameraParams
 from diffsense.sensors._weather import CLEAR, Weather
@@ -46,6 +57,15 @@ def camera_depth_sigma_m(
     return range_m**2 * config.disparity_error_px / (k * params.baseline_m)
 
 
+def _confidence_log_p(width_px, visible, limit_m, range_m, depth_sigma_m, config: CameraConfig) -> LogProbability:
+    """The "confidence" law: P(confidence >= threshold) P(measured depth <= limit), in log space."""
+    law = config.detection
+    mean = confidence_mean(width_px, visible, confidence_max=law.confidence_max, width50_px=law.width50_px,
+                           width_scale_px=law.width_scale_px)
+    return LogProbability(log_confidence_above(mean, law.threshold, law.sigma)
+                          + log_reported_below(limit_m, range_m, depth_sigma_m))
+
+
 def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mode: Mode,
                   temperature, weather: Weather = CLEAR):
     range_m, azimuth_rad = polar(tracks, config.mount_x_m)
@@ -53,15 +73,20 @@ def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mo
     half, hidden = vehicle_occlusion(tracks, range_m, azimuth_rad, config.mount_x_m, mode,
                                      tau.near_m * temperature, tau.overlap_deg * temperature)
     k = camera_px_per_rad(params)
-    gates = (
-        (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
-        # Fog and rain cap the range at Koschmieder's contrast range (+inf in clear weather, so
-        # the minimum is then the range itself, bit for bit).
-        (jnp.minimum(params.range_m, weather.camera_range_m(range_m.dtype)) - range_m, tau.range_m * temperature),
-        (k * 2.0 * half - config.min_width_px, tau.width_px * temperature),
-        ((1.0 - hidden) - config.min_visible_fraction, tau.visible * temperature),
-    )
+    # Fog and rain cap the range at Koschmieder's contrast range (+inf in clear weather, so
+    # the minimum is then the range itself, bit for bit).
+    limit_m = jnp.minimum(params.range_m, weather.camera_range_m(range_m.dtype))
     depth_sigma = camera_depth_sigma_m(range_m, params, config)
+    if config.detection.law == "confidence":
+        gates = _confidence_log_p(k * 2.0 * half, in_fov_fraction(azimuth_rad, half, params.hfov_deg) * (1.0 - hidden),
+                                  limit_m, range_m, depth_sigma, config)
+    else:
+        gates = (
+            (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
+            (limit_m - range_m, tau.range_m * temperature),
+            (k * 2.0 * half - config.min_width_px, tau.width_px * temperature),
+            ((1.0 - hidden) - config.min_visible_fraction, tau.visible * temperature),
+        )
     bearing_sigma = config.bearing_error_px / camera_accuracy_px_per_rad(params, config) * jnp.ones_like(range_m)
     return gates, range_m, azimuth_rad, depth_sigma, bearing_sigma
 

@@ -66,7 +66,14 @@ def check_temperature(temperature):
 def p_from_gates(
     gates: Sequence[tuple[Float[Array, "..."], float | Float[Array, ""]]], mode: Mode
 ) -> Float[Array, "..."]:
-    """Detection probability from `(margin, tau)` pairs: soft logistic product or hard AND."""
+    """Detection probability from `(margin, tau)` pairs: soft logistic product or hard AND.
+
+    A probabilistic detection law (`_laws.py`) gives its log-probability instead of gates; it
+    is the probability of the physical event in either mode.
+    """
+    log_p = getattr(gates, "log_p", None)
+    if log_p is not None:
+        return exp_log_p(log_p)
     if mode == "hard":
         p = 1.0
         for margin, _ in gates:

@@ -24,6 +24,7 @@ import jax
 
 from diffsense import config as _config
 from diffsense.errors import InputError
+from diffsense.sensors._laws import CameraDetection, RadarDetection
 
 SensorName = Literal["radar", "camera"]
 SENSORS: tuple[str, ...] = ("radar", "camera")
@@ -182,6 +183,7 @@ class RadarConfig:
     azimuth_resolution_deg: float
     gain_follows_hfov: bool = True
     gain_beam_deg: float = 30.0
+    detection: RadarDetection = RadarDetection()  # the detection law (`_laws.py`)
 
     def __post_init__(self):
         check_params(self.params)
@@ -223,6 +225,7 @@ class CameraConfig:
     min_visible_fraction: float
     accuracy_follows_hfov: bool = True
     focal_length_px: float = 2400.0
+    detection: CameraDetection = CameraDetection()  # the detection law (`_laws.py`)
 
     def __post_init__(self):
         check_params(self.params)

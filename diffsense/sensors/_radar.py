@@ -10,6 +10,10 @@ p = gate(HFOV/2 - |azimuth|) gate(R_max - R) gate(SNR - occlusion loss - thresho
 attenuates the SNR by `occlusion_loss_db` per occluded fraction instead of hiding the target.
 Rain (`Weather`) attenuates the echo by its two-way ITU-R P.838-3 loss; fog does not.
 Measurement noise: the Table I accuracy plus the thermal term resolution / sqrt(2 SNR).
+
+With `[detection] law = "swerling1"` (`_laws.py`) the gates give way to the physical probability
+p = Pfa^(1/(1 + SNR)) P(measured range <= range_m), the SNR taking the Gaussian beam's two-way
+loss off boresight: HFOV is the beam's -3 dB width, and the SNR law alone sets the range.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from diffsense.scene import Scene
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
+from diffsense.sensors._laws import LogProbability, gaussian_beam_loss_db, log_reported_below, swerling1_log_pd
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensors._params import RadarConfig, RadarParams
 from diffsense.sensors._weather import CLEAR, Weather
@@ -71,16 +76,25 @@ def _radar_terms(tracks: Tracks, params: RadarParams, config: RadarConfig, mode:
     rcs = radar_rcs_dbsm(tracks.kind, config).astype(range_m.dtype)  # [V, 1]
     snr_db = radar_snr_db(range_m, rcs, params, config)
     snr_db = snr_db - config.occlusion_loss_db * shadow - weather.radar_loss_db(range_m)
-    gates = (
-        (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
-        (params.range_m - range_m, tau.range_m * temperature),
-        (snr_db - config.snr_threshold_db, tau.snr_db * temperature),
-    )
+    swerling = config.detection.law == "swerling1"
+    if swerling:  # the antenna pattern is the azimuth edge: two-way loss off boresight
+        snr_db = snr_db - 2.0 * gaussian_beam_loss_db(azimuth_rad, params.hfov_deg)
     # Thermal noise: resolution / sqrt(2 SNR), on top of the accuracy floor (Table I).
     thermal = 10.0 ** (-jnp.clip(snr_db, -_SNR_CLIP_DB, _SNR_CLIP_DB) / 20.0) / math.sqrt(2.0)
     range_sigma = jnp.sqrt(config.range_accuracy_m**2 + (config.range_resolution_m * thermal) ** 2)
     az_sigma_deg = jnp.sqrt(config.azimuth_accuracy_deg**2
                             + (config.azimuth_resolution_deg * thermal) ** 2)
+    if swerling:
+        # Range from the SNR law alone; `range_m` is where the radar stops reporting, applied
+        # to the measured range (the Table I accuracy plus thermal noise).
+        gates = LogProbability(swerling1_log_pd(snr_db, config.detection.pfa)
+                               + log_reported_below(params.range_m, range_m, range_sigma))
+    else:
+        gates = (
+            (0.5 * params.hfov_deg - jnp.rad2deg(jnp.abs(azimuth_rad)), tau.fov_deg * temperature),
+            (params.range_m - range_m, tau.range_m * temperature),
+            (snr_db - config.snr_threshold_db, tau.snr_db * temperature),
+        )
     return gates, range_m, azimuth_rad, range_sigma, jnp.deg2rad(az_sigma_deg)
 
 
