@@ -2,9 +2,13 @@
 
 For every prediction instant t (a 10 Hz frame index) and the scene's vehicles:
 
-1. Every measured point of the 3 s history window (frames t-30 .. t) is expressed in the
-   target's road-aligned frame at t: origin at the target's ground-truth position at t, axes
-   (lon forward, lat left) rotated by the road angle there (the paper's preprocessing).
+1. Every measured point of the 3 s history window (frames t-30 .. t) is expressed in the road's
+   curvilinear frame relative to the target at t: lon = s - s_target(t) along the road, lat =
+   d - d_target(t) to the left. This is the frame the predictors learnt in: NGSIM's local
+   coordinates run along the road, and the generated training traffic drives a straight ring in
+   (s, d). A Cartesian frame rotated by the road angle at t would turn a bend into lateral motion
+   the predictor cannot know of (on the US-101 segment's R = 1200 m bend, 75 m of travel is 2.3 m
+   of apparent lateral drift).
 2. The fill policy (`_fill.py`) turns missed detections into expected points.
 3. The window is downsampled to 5 Hz: 16 points, the last one at t.
 4. Neighbours are placed in the 13 x 3 social grid by their ground-truth lane and longitudinal
@@ -54,18 +58,22 @@ def ground_truth_detections(scene: Scene) -> Detections:
     return Detections(p_detect=p, x_m=scene.x_m, y_m=scene.y_m)
 
 
-def _target_pose(scene: Scene, frames: Int[Array, " I"]):
-    x0 = scene.x_m[frames, TARGET_INDEX]
-    y0 = scene.y_m[frames, TARGET_INDEX]
-    theta = scene.road_angle_rad[frames, TARGET_INDEX]
-    return x0, y0, theta
+def _road_points(scene: Scene, det_x_m: Array, det_y_m: Array, window: Int[Array, "I W"]) -> Array:
+    """Measured points of the frames `window` in the road frame (s, d) [I, W, V, 2] [m].
+
+    A measurement differs from its vehicle's true position by the sensor's error (metres); that
+    error is turned into the road frame at the vehicle's true pose and added to its true (s, d).
+    Exact for ground truth (no error); for a measurement, the neglected term is the error times
+    curvature x offset (below 1 % of the error on a highway's radii).
+    """
+    ex, ey = det_x_m[window] - scene.x_m[window], det_y_m[window] - scene.y_m[window]
+    c, s = jnp.cos(scene.road_angle_rad[window]), jnp.sin(scene.road_angle_rad[window])
+    return jnp.stack([scene.s_m[window] + c * ex + s * ey, scene.d_m[window] - s * ex + c * ey], axis=-1)
 
 
-def _to_target_frame(x, y, x0, y0, theta) -> Float[Array, "... 2"]:
-    """World points -> (lon, lat) relative to (x0, y0), rotated by -theta; x0.. broadcast."""
-    dx, dy = x - x0, y - y0
-    c, s = jnp.cos(theta), jnp.sin(theta)
-    return jnp.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+def _target_origin(scene: Scene, frames: Int[Array, " I"]) -> Float[Array, "I 2"]:
+    """The target's road-frame (s, d) at each prediction instant [m]."""
+    return jnp.stack([scene.s_m[frames, TARGET_INDEX], scene.d_m[frames, TARGET_INDEX]], axis=-1)
 
 
 def _windows(frames: Int[Array, " I"], offsets: np.ndarray) -> Int[Array, "I W"]:
@@ -105,12 +113,9 @@ def build_inputs(scene: Scene, det: Detections, frames: Int[Array, " I"], fill: 
     """
     frames = jnp.asarray(frames)
     step, history, _ = _frames(spec, scene.dt_s)
-    x0, y0, theta = _target_pose(scene, frames)
     window = _windows(frames, np.arange(-history, 1))  # [I, W]
-    # [I, W, V, 2] measured points in the target frame, and [I, W, V] probabilities.
-    z = _to_target_frame(
-        det.x_m[window], det.y_m[window], x0[:, None, None], y0[:, None, None], theta[:, None, None]
-    )
+    # [I, W, V, 2] measured points relative to the target, and [I, W, V] probabilities.
+    z = _road_points(scene, det.x_m, det.y_m, window) - _target_origin(scene, frames)[:, None, None, :]
     p = det.p_detect[window]
     # Fill along the window axis: put it next to the coordinate axis.
     z = jnp.swapaxes(z, 1, 2)  # [I, V, W, 2]
@@ -131,14 +136,12 @@ def build_inputs(scene: Scene, det: Detections, frames: Int[Array, " I"], fill: 
 
 
 def true_future(scene: Scene, frames: Int[Array, " I"], spec: InputSpec = CSLSTM_SPEC) -> Float[Array, "I F 2"]:
-    """The target's true future (the spec's points after t) in its road-aligned frame [m]."""
+    """The target's true future (the spec's points after t) relative to it at t, road frame [m]."""
     frames = jnp.asarray(frames)
     step, _, future = _frames(spec, scene.dt_s)
-    x0, y0, theta = _target_pose(scene, frames)
     window = _windows(frames, np.arange(step, future + 1, step))
-    xs = scene.x_m[window, TARGET_INDEX]
-    ys = scene.y_m[window, TARGET_INDEX]
-    return _to_target_frame(xs, ys, x0[:, None], y0[:, None], theta[:, None])
+    ahead = jnp.stack([scene.s_m[window, TARGET_INDEX], scene.d_m[window, TARGET_INDEX]], axis=-1)
+    return ahead - _target_origin(scene, frames)[:, None, :]
 
 
 def flatten_instants(inputs: PredictorInputs) -> PredictorInputs:
