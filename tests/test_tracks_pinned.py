@@ -15,7 +15,8 @@ import pytest
 
 from diffsense.scene import TARGET_INDEX
 from diffsense.sensors._datatypes import Detections
-from diffsense.tracks import build_inputs, ground_truth_detections, true_future
+from diffsense.tracks import (PredictorInputs, build_inputs, flatten_instants, ground_truth_detections,
+                             prediction_frames, true_future)
 from diffsense.tracks._fill import fill_window
 from tests._synthetic import straight_scene
 
@@ -111,3 +112,38 @@ def test_fill_happens_at_10_hz_before_downsampling(fill, kept_point):
     # Soft: p = 1/2 at t - 10 gives the average of the detected and the filled value.
     soft, _ = _history({T0 - 10: 0.5}, fill)
     assert soft[10, 0] == pytest.approx(0.5 * (-24.0) + 0.5 * kept_point, abs=1e-9)
+
+
+def test_prediction_frames_at_the_edges():
+    # CS-LSTM at 10 Hz: 30 history frames (15 points x 2) before t, 50 future frames after it.
+    # The shortest scene, 81 frames, has exactly one instant; one frame more at stride 1 has two.
+    np.testing.assert_array_equal(prediction_frames(81), [30])
+    np.testing.assert_array_equal(prediction_frames(82, stride_frames=1), [30, 31])
+    np.testing.assert_array_equal(prediction_frames(85, stride_frames=2), [30, 32, 34])
+    with pytest.raises(ValueError, match="needs at least 81"):
+        prediction_frames(80)
+
+
+def test_a_5_hz_scene_feeds_one_frame_per_point():
+    # At 5 Hz a predictor point is one frame: history t-15 ... t, future t+1 ... t+25 (5 s).
+    scene = straight_scene(s0_m=[0.0, 20.0], lane=[1, 1], speed_mps=[25.0, 24.0], num_frames=41, dt_s=0.2)
+    frames = prediction_frames(41, stride_frames=1, scene_dt_s=0.2)
+    np.testing.assert_array_equal(frames, [15])
+    future = np.asarray(true_future(scene, jax.numpy.asarray(frames))[0])
+    np.testing.assert_allclose(future[:, 0], 4.8 * np.arange(1, 26), atol=1e-9)
+    hist = np.asarray(build_inputs(scene, ground_truth_detections(scene), jax.numpy.asarray(frames), "hold").hist[0])
+    np.testing.assert_allclose(hist[:, 0], 4.8 * np.arange(-15, 1), atol=1e-9)
+
+
+def test_flatten_instants_puts_scene_major_rows_first():
+    # [N=2 scenes, I=3 instants, ...] -> [6, ...], row n * 3 + i holding scene n's instant i.
+    n, i = 2, 3
+    tag = np.arange(n * i, dtype=float).reshape(n, i)
+    inputs = PredictorInputs(hist=np.broadcast_to(tag[:, :, None, None], (n, i, 16, 2)),
+                             nbr_hist=np.broadcast_to(tag[:, :, None, None, None], (n, i, 4, 16, 2)),
+                             nbr_slot=np.zeros((n, i, 4), np.int32), nbr_weight=np.ones((n, i, 4)))
+    flat = flatten_instants(inputs)
+    assert flat.hist.shape == (6, 16, 2) and flat.nbr_hist.shape == (6, 4, 16, 2)
+    assert flat.nbr_slot.shape == flat.nbr_weight.shape == (6, 4)
+    np.testing.assert_array_equal(np.asarray(flat.hist)[:, 0, 0], [0, 1, 2, 3, 4, 5])
+    np.testing.assert_array_equal(np.asarray(flat.nbr_hist)[:, 2, 7, 1], [0, 1, 2, 3, 4, 5])
