@@ -7,6 +7,7 @@ these pin the soft values and every point in between.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import jax
@@ -147,3 +148,13 @@ def test_flatten_instants_puts_scene_major_rows_first():
     assert flat.nbr_slot.shape == flat.nbr_weight.shape == (6, 4)
     np.testing.assert_array_equal(np.asarray(flat.hist)[:, 0, 0], [0, 1, 2, 3, 4, 5])
     np.testing.assert_array_equal(np.asarray(flat.nbr_hist)[:, 2, 7, 1], [0, 1, 2, 3, 4, 5])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_ground_truth_detects_the_present_vehicles_in_the_scene_dtype(dtype):
+    # A float32 run stays float32 (under x64 a default float would be float64).
+    scene = straight_scene(s0_m=[0.0, 20.0, 40.0], lane=[1, 1, 2], speed_mps=[25.0] * 3, num_frames=3, dtype=dtype)
+    scene = dataclasses.replace(scene, present=jax.numpy.asarray([True, True, False]))
+    det = ground_truth_detections(scene)
+    assert det.p_detect.dtype == dtype
+    np.testing.assert_array_equal(np.asarray(det.p_detect), [[1.0, 1.0, 0.0]] * 3)
