@@ -25,7 +25,7 @@ from diffsense._problem import Problem
 from diffsense._result import Curves, Result
 from diffsense._timing import CompileClock
 from diffsense.errors import InputError
-from diffsense.metrics import Objective, make_objective, recorded_scenes, simulate_scenes
+from diffsense.metrics import Objective, SpeedShiftedScenes, make_objective, recorded_scenes, speed_shifted_scenes
 from diffsense.predictors import load_predictor
 from diffsense.sensors import Weather
 from diffsense.scene import ROLE_NAMES
@@ -56,21 +56,29 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     dtype = _precision(problem.float64)
     sensor = problem.make_sensor()
     predictor = _predictor(problem) if predictor is None else predictor
-    scene_key, noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))
+    noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))[1]  # [0] is the scenes' (traffic_scenes)
     if problem.scenes is not None:
         scenes, index, names, weather = recorded_scenes(
             problem.scenes, spec=predictor.spec, sensors=[sensor], stride_frames=problem.prediction_stride_frames,
             dtype=dtype)
     else:
-        scenes, index, names, weather = simulate_scenes(
-            problem.scenarios, problem.variants, scene_key, spec=predictor.spec, sensors=[sensor],
-            stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
-            dtype=dtype)
+        shifted, index, names, weather = traffic_scenes(problem, predictor.spec, sensor, dtype)
+        scenes = shifted.base
     frames = prediction_frames(scenes.num_frames, problem.prediction_stride_frames, predictor.spec, scenes.dt_s)
     return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
                           fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names,
                           question=problem.objective, miss_penalty_m2=problem.miss_penalty_m2,
                           weather=weather if problem.weather is None else Weather(**problem.weather))
+
+
+def traffic_scenes(problem: Problem, spec, sensor, dtype) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
+    """The problem's simulated scenes as a function of the traffic speed (`objective` evaluates
+    them at the problem's own; `diffsense.sensitivity` differentiates them)."""
+    scene_key = jax.random.split(jax.random.PRNGKey(problem.seed))[0]
+    return speed_shifted_scenes(
+        problem.scenarios, problem.variants, scene_key, spec=spec, sensors=[sensor],
+        stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
+        dtype=dtype, speed_offset_kmh=problem.traffic_speed_offset_kmh)
 
 
 def _config(problem: Problem) -> dict[str, Any]:
@@ -219,6 +227,10 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     {"kind": "soft" | "hard", "E_m", "tau", "done", "planned"} (for progress displays).
     """
     say = progress or (lambda message: None)
+    if sensitivity:  # refused before any work, not after the solve
+        from diffsense._sensitivity import check_theta
+
+        check_theta(problem, sensitivity)
     if len(problem.params) != 1 or problem.cost_weight > 0:
         return _optimise_box(problem, E, predictor, say, on_evaluation)
     (name, (lo, hi)), = problem.params.items()

@@ -57,6 +57,9 @@ class Problem:
         weather: the scenes' weather, {"rain_mm_h": R, "fog_visibility_m": V} (either may be left
             out: no rain, no fog), for every scenario; None: each scenario's own (its TOML's
             `[weather]`, clear for the shipped ones).
+        traffic_speed_offset_kmh: added to every scenario's ego start speed, and so to every
+            vehicle's (theirs are relative to it): the ODD's traffic speed [km/h]; 0 keeps the
+            scenarios' own. Not for recorded scenes.
         objective: the question E answers: "eq12" (the paper's, every instant) or "tracked"
             (the error where the target has a track, plus `miss_penalty_m2` per missed share).
         miss_penalty_m2: the price of an instant without a track under "tracked" [m^2].
@@ -84,6 +87,7 @@ class Problem:
     background_vehicles: int = 0
     float64: bool = True
     weather: Mapping[str, float] | None = None
+    traffic_speed_offset_kmh: float = 0.0
     objective: str = "eq12"
     miss_penalty_m2: float = 100.0
     steps: Sequence[float] | None = None
@@ -128,6 +132,10 @@ class Problem:
                 raise InputError(f"recorded scenes are named 'highd:PATH' or 'ngsim:PATH', got {self.scenes!r}")
             if not Path(path).is_file():
                 raise InputError(f"recorded scenes: {path} is not a file")
+        set_("traffic_speed_offset_kmh", _finite(self.traffic_speed_offset_kmh, "traffic_speed_offset_kmh"))
+        if self.scenes is not None and self.traffic_speed_offset_kmh != 0.0:
+            raise InputError("recorded scenes have the speeds they were recorded at: traffic_speed_offset_kmh "
+                             "applies to simulated scenarios only")
         if self.objective not in QUESTIONS:
             raise InputError(f"unknown objective {self.objective!r} (known: {', '.join(QUESTIONS)})")
         set_("miss_penalty_m2", _finite(self.miss_penalty_m2, "miss_penalty_m2"))

@@ -1,16 +1,27 @@
 """`sensitivity(problem, result, theta)`: how the best sensor setting moves with the ODD.
 
-For an ODD parameter theta (the weather: "rain_mm_h", "fog_visibility_m") the optimum r*(theta) of
-the soft objective at the final temperature satisfies dE^2/dr = 0, so by the implicit function
-theorem dr*/dtheta = -(d2E^2/dr dtheta) / (d2E^2/dr2) at r* (`diffsense.solve.argmin_derivative`),
-on the real objective: scenes, sensor and predictor. theta moves every scene variant's value by
-the same amount (a scenario with its own weather keeps its offset). Zero on a bound: the
-constraint stays active for small changes of theta. No re-solve is needed.
+For an ODD parameter theta the optimum r*(theta) of the soft objective at the final temperature
+satisfies dE^2/dr = 0, so by the implicit function theorem dr*/dtheta = -(d2E^2/dr dtheta) /
+(d2E^2/dr2) at r* (`diffsense.solve.argmin_derivative`), on the real objective: scenes, sensor
+and predictor. No re-solve is needed. Zero on a bound: the constraint stays active for small
+changes of theta.
+
+- "rain_mm_h", "fog_visibility_m": the weather. theta moves every scene variant's value by the
+  same amount (a scenario with its own weather keeps its offset).
+- "traffic_speed_kmh": every vehicle's start speed, i.e. each scenario's ego speed (nominal and
+  range; the others' are relative to it) and with it the desired speeds, which follow the start
+  speeds. The scenes are re-simulated inside the derivative (the IDM simulation is JAX), and the
+  ground-truth predictions with them, so E is differentiable in the speed. A uniform time or
+  space scaling would not do: IDM's time headway, minimum gap and accelerations do not scale
+  with speed, so a faster scene is not a rescaled slower one. The vehicles kept per scene are
+  those kept at the problem's speed (their margins cover a small change); the derivative is that
+  of the smooth part between the simulation's discrete events (leader switches, a follower
+  becoming free). Recorded scenes have no speed knob and are refused.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -20,22 +31,52 @@ import jax.numpy as jnp
 from diffsense._problem import Problem
 from diffsense._result import Result
 from diffsense.errors import InputError
-from diffsense.metrics import Objective
+from diffsense.metrics import Objective, SpeedShiftedScenes, with_scenes
 from diffsense.solve import argmin_derivative
 
-ODD_PARAMETERS = ("rain_mm_h", "fog_visibility_m")
+WEATHER_PARAMETERS = ("rain_mm_h", "fog_visibility_m")
+ODD_PARAMETERS = (*WEATHER_PARAMETERS, "traffic_speed_kmh")
+
+
+def check_theta(problem: Problem, theta: Sequence[str]) -> None:
+    """InputError (one line) for an unknown theta, or one the problem's scenes cannot vary."""
+    unknown = [t for t in theta if t not in ODD_PARAMETERS]
+    if unknown:
+        raise InputError(f"no sensitivity to {unknown[0]!r}: the differentiable ODD parameters are "
+                         f"{', '.join(ODD_PARAMETERS)}")
+    if "traffic_speed_kmh" in theta and problem.scenes is not None:
+        raise InputError(f"no sensitivity to traffic_speed_kmh for recorded scenes ({problem.scenes}): "
+                         "they move at the speeds they were recorded at")
+
+
+def _moved(E: Objective, how: str | SpeedShiftedScenes, shift: jax.Array) -> Objective:
+    """E with every variant's weather `how` moved by `shift`, or over the scenes `how` at a
+    traffic speed moved by `shift` [km/h]."""
+    if isinstance(how, str):
+        return eqx.tree_at(lambda o: getattr(o.weather, how), E, getattr(E.weather, how) + shift)
+    return with_scenes(E, how(shift))
 
 
 @eqx.filter_jit
-def _derivative(E: Objective, name: str, r_star, tau, on_bound):
-    base = getattr(E.weather, name)
-    param = E.names[0]
-
+def _derivative(E: Objective, how, param: str, r_star, tau, on_bound):
     def e2(r, shift):
-        shifted = eqx.tree_at(lambda o: getattr(o.weather, name), E, base + shift)
-        return shifted.e2({param: r}, tau)
+        return _moved(E, how, shift).e2({param: r}, tau)
 
     return argmin_derivative(e2, r_star, jnp.zeros((), E.dtype), on_bound=on_bound)
+
+
+def odd_shift(problem: Problem, E: Objective, theta: str) -> Callable[[jax.Array], Objective]:
+    """`shift -> E` with the ODD parameter `theta` moved by `shift` (its unit) from the problem's:
+    the function whose derivatives `sensitivity` takes (jit-able, differentiable in `shift`)."""
+    check_theta(problem, [theta])
+    how = _speed_scenes(problem, E) if theta == "traffic_speed_kmh" else theta
+    return lambda shift: _moved(E, how, shift)
+
+
+def _speed_scenes(problem: Problem, E: Objective) -> SpeedShiftedScenes:
+    from diffsense._optimise import traffic_scenes
+
+    return traffic_scenes(problem, E.spec, E.sensor, E.dtype)[0]
 
 
 def sensitivity(problem: Problem, result: Result, theta: Sequence[str], *, E: Objective | None = None
@@ -51,10 +92,7 @@ def sensitivity(problem: Problem, result: Result, theta: Sequence[str], *, E: Ob
     """
     from diffsense._optimise import objective
 
-    unknown = [t for t in theta if t not in ODD_PARAMETERS]
-    if unknown:
-        raise InputError(f"no sensitivity to {unknown[0]!r}: the differentiable ODD parameters are "
-                         f"{', '.join(ODD_PARAMETERS)}")
+    check_theta(problem, theta)
     if len(result.r_star) != 1:
         raise InputError("sensitivity is implemented for one-parameter problems")
     E = objective(problem) if E is None else E
@@ -64,9 +102,10 @@ def sensitivity(problem: Problem, result: Result, theta: Sequence[str], *, E: Ob
     held = result.on_bound or (bool(levels) and levels[-1].bound != 0)
     if levels:
         r_star = levels[-1].r
+    args = (jnp.asarray(r_star, E.dtype), jnp.asarray(tau, E.dtype), jnp.asarray(held))
     out: dict[str, dict[str, Any]] = {}
     for name in theta:
-        d = float(_derivative(E, name, jnp.asarray(r_star, E.dtype), jnp.asarray(tau, E.dtype),
-                              jnp.asarray(held)))
+        how = _speed_scenes(problem, E) if name == "traffic_speed_kmh" else name
+        d = float(_derivative(E, how, param, *args))
         out[name] = {param: d if jnp.isfinite(d) else None}
     return out

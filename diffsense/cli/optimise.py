@@ -63,7 +63,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--rain-mm-h", type=float, metavar="R", help="rain rate [mm/h] (radar attenuation, camera visibility)")
     p.add_argument("--fog-visibility-m", type=float, metavar="V", help="fog visibility [m] (camera contrast range)")
     p.add_argument("--sensitivity", metavar="THETA,...",
-                   help="ODD parameters whose dr*/dtheta to report: rain_mm_h, fog_visibility_m")
+                   help="ODD parameters whose dr*/dtheta to report: rain_mm_h, fog_visibility_m, "
+                   "traffic_speed_kmh (simulated scenarios only)")
+    p.add_argument("--traffic-speed-offset-kmh", type=float, metavar="KMH",
+                   help="added to every vehicle's start speed in the scenarios [km/h] (default 0)")
     p.add_argument("--dense-check", type=float, metavar="STEP",
                    help="also evaluate E_hard every STEP (parameter units, e.g. 0.5 deg) over the "
                    "interval and report whether r* lies in the basin of the best dense point")
@@ -141,7 +144,8 @@ def problems(args: argparse.Namespace) -> list:
             fields["scenes"] = args.scenes
         for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed"),
                           ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"),
-                          ("profile", "profile"), ("sensor_config", "sensor_config")):
+                          ("profile", "profile"), ("sensor_config", "sensor_config"),
+                          ("traffic_speed_offset_kmh", "traffic_speed_offset_kmh")):
             if getattr(args, flag) is not None:
                 fields[key] = getattr(args, flag)
         estimator = to_dict(settings.problem.estimator)
@@ -174,21 +178,24 @@ def problems(args: argparse.Namespace) -> list:
 def _check_inputs(problems_: list) -> None:
     """Every input that can be checked before any computation: scenarios, predictor file."""
     from diffsense.scene import load_scenario
+    from diffsense.scene._scenario_config import check_speed_offset
 
     for problem in problems_:
         for name in () if problem.scenes is not None else problem.scenarios:
-            load_scenario(name)
+            check_speed_offset(load_scenario(name), problem.traffic_speed_offset_kmh)
         if isinstance(problem.predictor, str) and problem.predictor and not Path(problem.predictor).is_file():
             raise InputError(f"--model {problem.predictor}: not a file")
 
 
-def _sensitivity_names(text: str | None) -> tuple[str, ...]:
-    from diffsense._sensitivity import ODD_PARAMETERS
+def _sensitivity_names(text: str | None, problems_: list) -> tuple[str, ...]:
+    from diffsense._sensitivity import ODD_PARAMETERS, check_theta
 
     names = tuple(t.strip() for t in (text or "").split(",") if t.strip())
     unknown = [t for t in names if t not in ODD_PARAMETERS]
     if unknown:
         raise InputError(f"--sensitivity: no sensitivity to {unknown[0]!r} (known: {', '.join(ODD_PARAMETERS)})")
+    for problem in problems_:
+        check_theta(problem, names)
     return names
 
 
@@ -219,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
         raise InputError(f"--out {out} exists and is not a folder")
     from diffsense._io import check_writable, output_set
 
-    _sensitivity_names(args.sensitivity)
+    _sensitivity_names(args.sensitivity, todo)
     check_writable(out)  # before any computation
     _check_memory(todo, args.max_memory_gb)
 
@@ -230,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     from diffsense.predictors import load_predictor
 
     progress = Progress(args.quiet)
-    theta = _sensitivity_names(args.sensitivity)
+    theta = _sensitivity_names(args.sensitivity, todo)
 
     model = todo[0].predictor
     predictor = load_predictor(model or None)  # a bad checkpoint fails before any output

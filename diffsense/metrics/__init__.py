@@ -1,7 +1,16 @@
 """Metrics: E_RMSE(r) (the paper's Eq. 12) as a pure equinox Module, its estimators, and the
 per-horizon RMSE of both predictions against the true future."""
 
-from diffsense.metrics._build import PAPER_SCENARIOS, make_objective, recorded_scenes, relevance_reach, simulate_scenes
+from diffsense.metrics._build import (
+    PAPER_SCENARIOS,
+    SpeedShiftedScenes,
+    make_objective,
+    recorded_scenes,
+    relevance_reach,
+    simulate_scenes,
+    speed_shifted_scenes,
+    with_scenes,
+)
 from diffsense.metrics._estimators import ESTIMATORS, Estimator, EstimatorConfig, relaxed_bernoulli
 from diffsense.metrics._cost import cost_breakdown, load_costs, make_cost
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
@@ -11,5 +20,5 @@ __all__ = [
     "COVERAGE_PARTS", "QUESTIONS", "cost_breakdown", "coverage_parts", "load_costs", "make_cost",
     "ESTIMATORS", "PAPER_SCENARIOS", "Estimator", "EstimatorConfig", "HardEvaluation", "Objective",
     "ObjectiveData", "make_objective", "recorded_scenes", "relaxed_bernoulli", "relevance_reach", "safe_sqrt",
-    "simulate_scenes",
+    "simulate_scenes", "SpeedShiftedScenes", "speed_shifted_scenes", "with_scenes",
 ]

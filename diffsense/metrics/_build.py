@@ -11,7 +11,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -22,7 +24,8 @@ from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms
 from diffsense.metrics._objective import QUESTIONS, Objective, ObjectiveData
 from diffsense.metrics._sharding import shard_leading_axis
 from diffsense.predictors import InputSpec
-from diffsense.scene import Scene, load_scenario, relevant_vehicles, simulate_scenario
+from diffsense.scene import Scene, ScenarioConfig, load_scenario, relevant_vehicles, simulate_scenario
+from diffsense.scene._relevant import relevant_selection, select_vehicles
 from diffsense.sensors import CLEAR, Sensor, Weather
 from diffsense.tracks import FillPolicy, build_inputs, flatten_instants, ground_truth_detections, prediction_frames, true_future
 
@@ -57,31 +60,77 @@ def _pad_vehicles(scene: Scene, width: int) -> Scene:
     return Scene(**out, dt_s=scene.dt_s)
 
 
+def _scenario(name: str, background_vehicles: int) -> ScenarioConfig:
+    scenario = load_scenario(name)
+    if background_vehicles:
+        scenario = replace(scenario, background=replace(scenario.background, count=background_vehicles))
+    return scenario
+
+
+def _concat_scenes(scenes: Sequence[Scene], width: int) -> Scene:
+    return jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(s, width) for s in scenes])
+
+
 def simulate_scenes(
     scenarios: Sequence[str], variants: int, key: jax.Array, *, spec: InputSpec, sensors: Sequence[Sensor],
-    stride_frames: int = 4, background_vehicles: int = 0, dtype=jnp.float64,
+    stride_frames: int = 4, background_vehicles: int = 0, dtype=jnp.float64, speed_offset_kmh: float = 0.0,
 ) -> tuple[Scene, np.ndarray, tuple[str, ...], Weather]:
     """All variants of all scenarios, reduced to their relevant vehicles: Scene [N, T, V],
     the scenario index of each variant [N], the scenario names, and each variant's weather
-    (the scenario TOML's `[weather]`; leaves [N])."""
-    scenes, names, rain, fog = [], [], [], []
-    for i, name in enumerate(scenarios):
-        scenario = load_scenario(name)
-        if background_vehicles:
-            scenario = replace(scenario, background=replace(scenario.background, count=background_vehicles))
-        sim = simulate_scenario(scenario, variants, jax.random.fold_in(key, i), dtype=dtype)
+    (the scenario TOML's `[weather]`; leaves [N]). `speed_offset_kmh` moves every scenario's
+    traffic speed (`diffsense.scene.simulate_scenario`)."""
+    shifted, index, names, weather = speed_shifted_scenes(
+        scenarios, variants, key, spec=spec, sensors=sensors, stride_frames=stride_frames,
+        background_vehicles=background_vehicles, dtype=dtype, speed_offset_kmh=speed_offset_kmh)
+    return shifted.base, index, names, weather
+
+
+class SpeedShiftedScenes(eqx.Module):
+    """`simulate_scenes` as a function of the traffic speed: `self(offset_kmh)` re-simulates
+    every scenario with its speeds moved by `offset_kmh` more than `base` (traced values are
+    fine: the scenes are differentiable in it) and keeps the vehicles `base` kept, so the batch
+    keeps its shape. Relevance is decided at the base speed: its margins (see
+    `diffsense.scene.relevant_vehicles`) cover what a small speed change can bring into the grid.
+    """
+
+    base: Scene
+    keys: tuple[jax.Array, ...]
+    selections: tuple[tuple[jax.Array, jax.Array], ...]
+    configs: tuple[ScenarioConfig, ...] = eqx.field(static=True)
+    variants: int = eqx.field(static=True)
+    base_offset_kmh: float = eqx.field(static=True)
+    width: int = eqx.field(static=True)
+    dtype: Any = eqx.field(static=True)
+
+    def __call__(self, offset_kmh) -> Scene:
+        total = self.base_offset_kmh + offset_kmh
+        sims = [select_vehicles(simulate_scenario(cfg, self.variants, key, dtype=self.dtype, speed_offset_kmh=total),
+                                *sel) for cfg, key, sel in zip(self.configs, self.keys, self.selections)]
+        return _concat_scenes(sims, self.width)
+
+
+def speed_shifted_scenes(
+    scenarios: Sequence[str], variants: int, key: jax.Array, *, spec: InputSpec, sensors: Sequence[Sensor],
+    stride_frames: int = 4, background_vehicles: int = 0, dtype=jnp.float64, speed_offset_kmh: float = 0.0,
+) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
+    """`simulate_scenes`'s results with the scenes as a `SpeedShiftedScenes` (its `base` the batch)."""
+    configs = tuple(_scenario(name, background_vehicles) for name in scenarios)
+    keys = tuple(jax.random.fold_in(key, i) for i in range(len(configs)))
+    scenes, selections = [], []
+    for scenario, k in zip(configs, keys):
+        sim = simulate_scenario(scenario, variants, k, dtype=dtype, speed_offset_kmh=speed_offset_kmh)
         frames = prediction_frames(sim.num_frames, stride_frames, spec, sim.dt_s)
-        scenes.append(relevant_vehicles(sim, frames, **relevance_reach(spec, sensors)))
-        names.append(scenario.name)
-        rain.append(scenario.weather.rain_mm_h)
-        fog.append(scenario.weather.fog_visibility_m or np.inf)
+        selections.append(relevant_selection(sim, frames, **relevance_reach(spec, sensors)))
+        scenes.append(select_vehicles(sim, *selections[-1]))
     lengths = {s.num_frames for s in scenes}
     if len(lengths) != 1:
         raise InputError(f"scenarios must have the same duration to be pooled, got {sorted(lengths)} frames")
     width = max(s.num_vehicles for s in scenes)
-    batch = jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(s, width) for s in scenes])
-    weather = Weather(rain_mm_h=np.repeat(np.asarray(rain), variants), fog_visibility_m=np.repeat(np.asarray(fog), variants))
-    return batch, np.repeat(np.arange(len(scenes)), variants), tuple(names), weather
+    weather = Weather(rain_mm_h=np.repeat([c.weather.rain_mm_h for c in configs], variants),
+                      fog_visibility_m=np.repeat([c.weather.fog_visibility_m or np.inf for c in configs], variants))
+    shifted = SpeedShiftedScenes(_concat_scenes(scenes, width), keys, tuple(selections), configs, variants,
+                                 float(speed_offset_kmh), width, dtype)
+    return shifted, np.repeat(np.arange(len(configs)), variants), tuple(c.name for c in configs), weather
 
 
 def recorded_scenes(
@@ -103,6 +152,28 @@ def recorded_scenes(
     n = len(kept)
     return (batch, np.arange(n), tuple(f"{stem}#{i}" for i in range(n)),
             Weather(rain_mm_h=np.zeros(n), fog_visibility_m=np.full(n, np.inf)))
+
+
+def ground_truth_predictions(scenes: Scene, frames, fill: FillPolicy, predictor) -> jax.Array:
+    """The predictor's output from ground-truth histories at every instant: [N, I, F, 2] [m]."""
+    gt = jax.vmap(lambda s: build_inputs(s, ground_truth_detections(s), frames, fill, predictor.spec))(scenes)
+    pred = jax.jit(lambda p, x: p(x))(predictor, flatten_instants(gt))
+    return pred.reshape(scenes.x_m.shape[0], len(frames), -1, 2)
+
+
+def with_scenes(E: Objective, scenes: Scene) -> Objective:
+    """E over other scenes of the same shape as E's real variants [n, T, V] (e.g. the same
+    scenarios at another traffic speed): ground truth, true future and ground-truth predictions
+    recomputed from them (jit-able, differentiable in the scenes); noise keys, Monte-Carlo draws,
+    weights and weather kept. Padding rows added for sharding repeat the last scene, as before."""
+    pad = E.data.scenes.x_m.shape[0] - scenes.x_m.shape[0]
+    if pad:
+        scenes = jax.tree.map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]), scenes)
+    frames = np.asarray(E.frames)
+    fut = jax.vmap(lambda s: true_future(s, frames, E.spec))(scenes)
+    gt_pred = ground_truth_predictions(scenes, frames, E.fill, E.predictor)
+    return eqx.tree_at(lambda o: (o.data.scenes, o.data.gt_pred, o.data.true_fut), E,
+                       (scenes, gt_pred.astype(E.dtype), fut.astype(E.dtype)))
 
 
 def make_objective(
@@ -153,9 +224,7 @@ def make_objective(
     if shard:
         fixed = shard_leading_axis(fixed, pad_weight_index=2)
     scenes, scenario, weight, noise_keys, uniform, fut = fixed
-    gt = jax.vmap(lambda s: build_inputs(s, ground_truth_detections(s), frames, fill, spec))(scenes)
-    gt_pred = jax.jit(lambda p, x: p(x))(predictor, flatten_instants(gt))
-    gt_pred = gt_pred.reshape(scenario.shape[0], len(frames), -1, 2)
+    gt_pred = ground_truth_predictions(scenes, frames, fill, predictor)
     data = ObjectiveData(scenes=scenes, scenario=scenario, weight=weight, gt_pred=gt_pred,
                          true_fut=fut.astype(gt_pred.dtype), noise_key=noise_keys, mc_uniform=uniform)
     if scenario_names is None:

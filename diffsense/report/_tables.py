@@ -70,9 +70,10 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
         f"wall {wall['compile']:.1f} s compile + {wall['run']:.1f} s run",
     ]
     lines += [f"note: {n}" for n in result.get("notes", [])]
+    held = " (r* is on a bound, held there for small changes)" if result.get("on_bound") else ""
     for theta, d in (result.get("sensitivity") or {}).items():
         lines += [f"dr*/d{theta}: " + ", ".join(f"{p} {v:+.4g}" if v is not None else f"{p} undefined"
-                                                for p, v in d.items())]
+                                                for p, v in d.items()) + held]
     from diffsense._answer import explain
 
     near = result.get("near_optimal") or {}

@@ -97,16 +97,13 @@ def _mask(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach
     return jax.lax.map(one, scene)  # one scene at a time: [T, V, V] temporaries, not [N, T, V, V]
 
 
-def relevant_vehicles(
+def relevant_selection(
     scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, history_s: float,
     grid_half_length_m: float, sensor_reach_m: float, margin_m: float = MARGIN_M,
-) -> Scene:
-    """The scene restricted to its relevant vehicles, in their original order (ego 0, target 1).
-
-    The vehicle axis shrinks to the largest relevant count in the batch; a variant with fewer
-    relevant vehicles is padded with absent ones (present False, role BACKGROUND, 1 km behind the
-    ego). Not jit-able as a whole (its output size depends on the data): `relevant_mask` is.
-    """
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which vehicles `relevant_vehicles` keeps, as (order, keep) [N, K] for a batch [N, T, V]
+    (or [K] for one scene): the kept vehicles' indices first, in their order, then pad slots
+    (keep False). `select_vehicles(scene, order, keep)` applies it, also to a traced scene."""
     mask = np.asarray(relevant_mask(scene, frames, history_s=history_s, grid_half_length_m=grid_half_length_m,
                                     sensor_reach_m=sensor_reach_m, margin_m=margin_m))
     batched = mask.ndim == 2
@@ -115,9 +112,32 @@ def relevant_vehicles(
     # Stable sort puts kept vehicles first in their order; the rest fill the pad slots.
     order = np.argsort(~mask, axis=-1, kind="stable")[:, :width]
     keep = np.take_along_axis(mask, order, axis=-1)
+    return (order, keep) if batched else (order[0], keep[0])
+
+
+def select_vehicles(scene: Scene, order: Int[ArrayLike, "*N K"], keep: Bool[ArrayLike, "*N K"]) -> Scene:
+    """`scene` [*N, T, V] reduced to the selection of `relevant_selection` [*N, T, K] (jit-able)."""
+    batched = scene.s_m.ndim == 3
     sc = scene if batched else jax.tree.map(lambda a: a[None], scene)
-    out = _gather(sc, jnp.asarray(order), jnp.asarray(keep))
+    order, keep = (jnp.asarray(order), jnp.asarray(keep)) if batched else (jnp.asarray(order)[None], jnp.asarray(keep)[None])
+    out = _gather(sc, order, keep)
     return out if batched else jax.tree.map(lambda a: a[0], out)
+
+
+def relevant_vehicles(
+    scene: Scene, frames: Int[ArrayLike, " I"] | None = None, *, history_s: float,
+    grid_half_length_m: float, sensor_reach_m: float, margin_m: float = MARGIN_M,
+) -> Scene:
+    """The scene restricted to its relevant vehicles, in their original order (ego 0, target 1).
+
+    The vehicle axis shrinks to the largest relevant count in the batch; a variant with fewer
+    relevant vehicles is padded with absent ones (present False, role BACKGROUND, 1 km behind the
+    ego). Not jit-able as a whole (its output size depends on the data): `relevant_mask` and
+    `select_vehicles` are.
+    """
+    order, keep = relevant_selection(scene, frames, history_s=history_s, grid_half_length_m=grid_half_length_m,
+                                     sensor_reach_m=sensor_reach_m, margin_m=margin_m)
+    return select_vehicles(scene, order, keep)
 
 
 @jax.jit

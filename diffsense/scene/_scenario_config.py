@@ -165,14 +165,28 @@ class ScenarioConfig:
                              f"must start in lane {self.ego.lane - step}, got target_lane {self.target_lane}")
         if self.adjacent_lane in (self.ego.lane, self.target_lane):
             raise InputError(f"adjacent_lane must differ from the ego's and the target's, got {self.adjacent_lane}")
-        slowest_kmh = self.ego.speed_kmh.low + min(
-            0.0, *(sp.relative_speed_kmh.low for sp in (self.target, self.lead, self.target_lead, self.adjacent)),
-            self.background.relative_speed_kmh.low)
+        slowest_kmh = slowest_start_kmh(self)
         if slowest_kmh <= 0.0:
             raise InputError(f"every vehicle must start moving forward: ego.speed_kmh.low plus the lowest "
                              f"relative_speed_kmh is {slowest_kmh} km/h")
         if not 1.0 <= self.duration_s <= 120.0:
             raise InputError(f"duration_s must be in [1, 120] s, got {self.duration_s}")
+
+
+def slowest_start_kmh(cfg: ScenarioConfig) -> float:
+    """The lowest start speed any vehicle of any variant of `cfg` can draw [km/h]."""
+    specs = (cfg.target, cfg.lead, cfg.target_lead, cfg.adjacent)
+    return cfg.ego.speed_kmh.low + min(0.0, *(sp.relative_speed_kmh.low for sp in specs),
+                                       cfg.background.relative_speed_kmh.low)
+
+
+def check_speed_offset(cfg: ScenarioConfig, speed_offset_kmh: float) -> None:
+    """InputError unless every vehicle of `cfg` still starts moving with its speeds moved by
+    `speed_offset_kmh` (see `diffsense.scene.simulate_scenario`)."""
+    slowest = slowest_start_kmh(cfg)
+    if not slowest + speed_offset_kmh > 0.0:
+        raise InputError(f"{cfg.name}: a traffic speed offset of {speed_offset_kmh:g} km/h stops its slowest "
+                         f"vehicle (start speed {slowest:g} km/h): every vehicle must start moving")
 
 
 @dataclasses.dataclass(frozen=True)

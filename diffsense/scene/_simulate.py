@@ -23,7 +23,13 @@ from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams, idm_acceleration
 from diffsense.scene._lane_change import quintic_lateral_offset_m, quintic_lateral_speed_mps
 from diffsense.scene._mobil import MOBILParams
 from diffsense.scene._road import Road, curvature_1pm, frenet_to_cartesian, lane_index, load_road
-from diffsense.scene._scenario_config import DriverModel, ScenarioConfig, VehicleModels, load_vehicle_models
+from diffsense.scene._scenario_config import (
+    DriverModel,
+    ScenarioConfig,
+    VehicleModels,
+    check_speed_offset,
+    load_vehicle_models,
+)
 from diffsense.scene._variants import ScenarioNumbers, VehiclePlan, draw_plan, scenario_numbers
 
 SCENE_DT_S = 0.1  # 10 Hz, the rate of the paper's recordings
@@ -155,6 +161,7 @@ def simulate_numbers(nums: ScenarioNumbers, road: Road, driver: DriverModel, key
 def simulate_scenario(
     cfg: ScenarioConfig, num_variants: int, key: PRNGKeyArray | int, *, dtype=jnp.float32,
     road: Road | None = None, models: VehicleModels | None = None,
+    speed_offset_kmh: float | Float[Array, ""] = 0.0,
 ) -> Scene:
     """Simulate variant 0 (nominal) and `num_variants - 1` randomised variants: Scene [N, T, V].
 
@@ -162,9 +169,16 @@ def simulate_scenario(
     `key` is a PRNG key (or an int seed); variant k > 0 depends only on (key, k), so asking for
     more variants keeps the earlier ones. The road and vehicle models default to the shipped ones
     named by the config. Arrays are of `dtype` (float32 by default; float64 needs jax_enable_x64).
+
+    `speed_offset_kmh` moves the ego's start speed (nominal and range) by that much, which is
+    the same as editing `ego.speed_kmh` in the config: every other vehicle's start speed is
+    relative to the ego's, and desired speeds follow start speeds (see `_idm`). It may be a
+    traced value: the scene is differentiable in it (between the simulation's discrete events).
     """
     if not isinstance(num_variants, int) or num_variants < 1:
         raise InputError(f"num_variants must be a positive integer, got {num_variants!r}")
+    if isinstance(speed_offset_kmh, (int, float)):  # a traced offset is the caller's to check
+        check_speed_offset(cfg, speed_offset_kmh)
     road = load_road(cfg.road) if road is None else road
     models = load_vehicle_models() if models is None else models
     for what, lane in (("ego.lane", cfg.ego.lane), ("target_lane", cfg.target_lane), ("adjacent_lane", cfg.adjacent_lane)):
@@ -174,6 +188,7 @@ def simulate_scenario(
         key = jax.random.key(key)
     num_frames = round(cfg.duration_s / SCENE_DT_S) + 1
     nums = scenario_numbers(cfg, models, road, dtype)
+    nums = dataclasses.replace(nums, ego_speed_mps=nums.ego_speed_mps + jnp.asarray(speed_offset_kmh, dtype) / 3.6)
     mobil = None
     if cfg.background.count and cfg.background.mobil:
         values = dataclasses.asdict(models.mobil)

@@ -1,0 +1,134 @@
+"""Traffic speed as an ODD parameter: the scenes re-simulated at a traced speed offset, E and its
+derivatives in it (float64 central differences), dr*/d(traffic_speed_kmh) against re-solved optima.
+
+The problem is test_sensitivity's (the toy sensor whose noise grows with the square of its range,
+the toy predictor) on the simulated scenario sc01, where E(range) has an interior minimum near
+38 m.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffsense as ds
+from diffsense._sensitivity import odd_shift
+from diffsense.scene import load_scenario, simulate_scenario
+from diffsense.scene._scenario_config import Range
+from tests._recorded_files import write_highd
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor
+from tests.test_sensitivity import RainyToy, _result
+
+ROOT = Path(__file__).resolve().parents[1]
+R_M = 38.0  # next to the interior minimum
+
+
+@pytest.fixture(scope="module")
+def setup():
+    jax.config.update("jax_enable_x64", True)
+    problem = ds.Problem(sensor=RainyToy(), predictor=ToyPredictor(jnp.asarray(TOY_GAIN)),
+                         params={"range_m": (10.0, 120.0)}, scenarios=("sc01",), variants=1,
+                         prediction_stride_frames=10)
+    E = ds.objective(problem)
+    moved = odd_shift(problem, E, "traffic_speed_kmh")
+
+    def e2(r, shift):
+        return moved(shift).e2({"range_m": r}, 1.0)
+
+    g = jax.grad(e2, 0)
+    # One program for every check: E^2, dE^2/dr, dE^2/dtheta, d2E^2/dr dtheta and the scenes.
+    f = jax.jit(lambda r, s: (e2(r, s), g(r, s), jax.grad(e2, 1)(r, s), jax.grad(g, 1)(r, s),
+                              moved(s).data.scenes))
+    return problem, E, f
+
+
+def test_zero_shift_is_the_problem_itself(setup):
+    _, E, f = setup
+    e2, *_, scenes = f(R_M, 0.0)
+    np.testing.assert_allclose(e2, E.e2({"range_m": R_M}), rtol=1e-12)
+    np.testing.assert_array_equal(scenes.present, E.data.scenes.present)
+    np.testing.assert_allclose(scenes.x_m, E.data.scenes.x_m, rtol=0, atol=1e-9)
+
+
+def test_cross_derivative_matches_central_differences(setup):
+    *_, f = setup
+    h = 1e-4  # E^2 has kinks in the speed (the simulation's discrete events): a small step stays between them
+    cross = float(f(R_M, 0.0)[3])
+    fd = (float(f(R_M, h)[1]) - float(f(R_M, -h)[1])) / (2 * h)
+    assert abs(cross) > 1e-3  # the speed matters here
+    np.testing.assert_allclose(cross, fd, rtol=1e-5)
+    dE2_ds = float(f(R_M, 0.0)[2])
+    np.testing.assert_allclose(dE2_ds, (float(f(R_M, h)[0]) - float(f(R_M, -h)[0])) / (2 * h), rtol=1e-5)
+
+
+@pytest.mark.parametrize("shift_kmh", [-30.0, 60.0])
+def test_finite_over_the_documented_speed_range(setup, shift_kmh):
+    """sc01's slowest vehicle starts at 35 km/h: -30 km/h leaves it 5 km/h; +60 km/h takes the
+    ego to 115 km/h."""
+    _, E, f = setup
+    *out, scenes = f(R_M, shift_kmh)
+    assert np.all(np.isfinite(out)), out
+    ego_s = scenes.s_m[0, :, 0]
+    travelled = float(ego_s[-1] - ego_s[0]) - float(E.data.scenes.s_m[0, -1, 0] - E.data.scenes.s_m[0, 0, 0])
+    assert np.sign(travelled) == np.sign(shift_kmh) and abs(travelled) > 0.5 * abs(shift_kmh) / 3.6 * 20.0
+
+
+def test_the_offset_is_editing_the_scenario_speed():
+    cfg = load_scenario("sc01")
+    v = cfg.ego.speed_kmh
+    edited = dataclasses.replace(cfg, ego=dataclasses.replace(cfg.ego, speed_kmh=Range(v.nominal + 12.5, v.low + 12.5,
+                                                                                           v.high + 12.5)))
+    a = simulate_scenario(cfg, 2, 3, dtype=jnp.float64, speed_offset_kmh=12.5)
+    b = simulate_scenario(edited, 2, 3, dtype=jnp.float64)
+    np.testing.assert_allclose(a.s_m, b.s_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.speed_mps, b.speed_mps, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(simulate_scenario(edited, 2, 3, dtype=jnp.float64, speed_offset_kmh=0.0).s_m, b.s_m)
+
+
+def test_refusals_are_one_line(tmp_path):
+    with pytest.raises(ds.InputError, match=r"stops its slowest vehicle \(start speed 35 km/h\)"):
+        simulate_scenario(load_scenario("sc01"), 1, 0, speed_offset_kmh=-35.0)
+    path = write_highd(tmp_path)
+    recorded = ds.Problem(scenes=f"highd:{path}")
+    with pytest.raises(ds.InputError, match="no sensitivity to traffic_speed_kmh for recorded scenes"):
+        ds.sensitivity(recorded, _result(30.0), ["rain_mm_h", "traffic_speed_kmh"])
+    with pytest.raises(ds.InputError, match="simulated scenarios only"):
+        ds.Problem(scenes=f"highd:{path}", traffic_speed_offset_kmh=5.0)
+    for args in (["--scenes", f"highd:{path}", "--sensitivity", "traffic_speed_kmh"],
+                 ["--scenarios", "sc01", "--traffic-speed-offset-kmh", "-40"]):
+        out = tmp_path / "out"
+        proc = subprocess.run([sys.executable, "-m", "diffsense.optimise", *args, "--out", str(out)],
+                              cwd=ROOT, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 2, proc.stderr
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error:"), proc.stderr
+        assert not out.exists()
+
+
+@pytest.mark.slow
+def test_implicit_derivative_matches_re_solved_optima(setup):
+    problem, E, f = setup
+
+    def re_solve(shift, lo=30.0, hi=50.0):
+        """The stationary point of the soft E^2 by bisection on its derivative, to 1e-10 m."""
+        assert f(lo, shift)[1] < 0 < f(hi, shift)[1]
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if f(mid, shift)[1] < 0 else (lo, mid)
+        return 0.5 * (lo + hi)
+
+    r_star = re_solve(0.0)
+    ift = ds.sensitivity(problem, _result(r_star), ["traffic_speed_kmh"], E=E)["traffic_speed_kmh"]["range_m"]
+    h = 0.1  # inside the smooth piece around the problem's speed (kinks lie within 0.5 km/h of it)
+    fd = (re_solve(h) - re_solve(-h)) / (2 * h)
+    assert abs(fd) > 0.01
+    np.testing.assert_allclose(ift, fd, rtol=0.05)
+    on_bound = ds.sensitivity(problem, _result(r_star, on_bound=True), ["traffic_speed_kmh"], E=E)
+    assert on_bound["traffic_speed_kmh"]["range_m"] == 0.0
