@@ -100,3 +100,18 @@ def test_padding_adds_absent_slots_and_leaves_the_real_vehicles():
     assert padded.num_vehicles == 5 and not np.any(padded.present[..., 3:])
     for name in ("s_m", "x_m", "y_m", "speed_mps", "lane", "present", "length_m", "kind", "role"):
         np.testing.assert_array_equal(getattr(padded, name)[..., :3], getattr(b, name), err_msg=name)
+
+
+def test_simulated_scenarios_are_pooled_scenario_major():
+    from diffsense.metrics import simulate_scenes
+    from diffsense.predictors import CSLSTM_SPEC
+
+    key, reach = jax.random.PRNGKey(0), dict(spec=CSLSTM_SPEC, sensors=[Radar.from_toml()], stride_frames=20)
+    scenes, index, names, weather = simulate_scenes(["sc01", "sc02"], 2, key, **reach)
+    assert index.tolist() == [0, 0, 1, 1] and names == ("sc01", "sc02")
+    assert scenes.x_m.shape[0] == 4 and np.shape(weather.rain_mm_h) == (4,)
+    # Row 2 is sc02's nominal variant (variant 0 is the scenario as written, whatever the key;
+    # two variants again, so the simulation compiled above is reused).
+    alone, _, _, _ = simulate_scenes(["sc02"], 2, jax.random.PRNGKey(5), **reach)
+    np.testing.assert_allclose(scenes.x_m[2, :, : alone.num_vehicles], alone.x_m[0])
+    assert not np.allclose(scenes.x_m[0, :, :2], scenes.x_m[2, :, :2])
