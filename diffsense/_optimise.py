@@ -170,15 +170,21 @@ def _breakdowns(ev: Evaluator, E: Objective, result, miss_penalty_m2: float) -> 
 
 
 def _dense_check(ev: Evaluator, result, lo: float, hi: float, step: float) -> dict[str, Any]:
-    """E_hard on a dense grid and whether r* lies in the basin of its best point."""
-    dense = dense_grid_search(ev.e_hard, (lo, hi), step)
-    why = basin_check(dense, result.r_star, result.E_hard_star, result.bracket)
+    """The reference E_ref (the hard objective's expectation over detection draws; E_hard itself
+    under a deterministic detection law) on a dense grid, and whether r* lies in the basin of its
+    best point."""
+    dense = dense_grid_search(ev.e_reference, (lo, hi), step)
+    star = ev.reference(result.r_star)
+    why = basin_check(dense, result.r_star, float(star.e), result.bracket)
     i = dense.best_index
+    best = ev.reference(float(dense.r[i]))
     return {
-        "step": step, "evaluations": dense.evaluations, "wall_s": dense.wall_s,
-        "r_best": float(dense.r[i]), "E_hard_best": float(dense.E_hard[i]),
+        "step": step, "evaluations": dense.evaluations, "wall_s": dense.wall_s, "objective": "reference",
+        "reference_draws": int(best.draws.size),
+        "r_best": float(dense.r[i]), "E_ref_best": float(best.e), "E_ref_best_se": float(best.e_se),
+        "E_ref_star": float(star.e), "E_ref_star_se": float(star.e_se),
         "basin": list(dense.basin()), "in_basin": why is None,
-        "E_hard_star_minus_best": result.E_hard_star - float(dense.E_hard[i]),
+        "E_ref_star_minus_best": float(star.e) - float(best.e),
         "verdict": why or f"r* lies in the basin {list(dense.basin())} of the best dense point "
                           f"r={float(dense.r[i]):.6g}",
     }
@@ -219,7 +225,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     One-parameter problems: the stepped sweep on E_hard, then the continuous solve inside the
     best step's bracket (`diffsense.solve.solve`; the hard estimator searches an inner grid
     instead), the answer chosen on E_hard. With `figures`, the evaluations the figures draw
-    are made too (`Result.curves`); with `problem.dense_check`, a dense E_hard grid.
+    are made too (`Result.curves`); with `problem.dense_check`, a dense grid of the reference E_ref.
     `E` reuses an already built `objective(problem)`; `predictor` an already loaded predictor.
     `sensitivity` names ODD parameters ("rain_mm_h", ...) whose dr*/dtheta is computed at the
     answer (`diffsense.sensitivity`) and kept in `Result.sensitivity`.
@@ -266,7 +272,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
     dense = None
     if problem.dense_check is not None:
-        say(f"{problem.sensor_kind}: dense hard grid every {problem.dense_check:g} {spec.unit}")
+        say(f"{problem.sensor_kind}: dense reference grid every {problem.dense_check:g} {spec.unit}")
         dense = _dense_check(ev, result, lo, hi, problem.dense_check)
         result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + dense["verdict"]))
     if domain_note(domain):

@@ -112,8 +112,11 @@ def test_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
     assert set(result["wall_s"]) >= {"compile", "run"}
     dense = result["dense_check"]  # 30, 45, ..., 180: 11 hard evaluations
     assert dense["evaluations"] == 11 and dense["step"] == 15.0
-    assert dense["E_hard_best"] <= min(p["E_hard"] for p in result["sweep"]) + 1e-12
-    assert dense["E_hard_star_minus_best"] == pytest.approx(result["E_hard_star"] - dense["E_hard_best"])
+    # The shipped threshold law is deterministic: its reference is E_hard, with no standard error.
+    assert dense["objective"] == "reference" and dense["E_ref_best_se"] == 0.0 and dense["E_ref_star_se"] == 0.0
+    assert dense["E_ref_best"] <= min(p["E_hard"] for p in result["sweep"]) + 1e-12
+    assert dense["E_ref_star"] == pytest.approx(result["E_hard_star"], rel=1e-12)
+    assert dense["E_ref_star_minus_best"] == pytest.approx(result["E_hard_star"] - dense["E_ref_best"])
     assert any(n == "dense check: " + dense["verdict"] for n in result["notes"])
     assert dense["in_basin"] == dense["verdict"].startswith("r* lies in the basin")
     for name in ("objective.png", "rmse_horizon.png", "detections.png"):

@@ -68,8 +68,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--traffic-speed-offset-kmh", type=float, metavar="KMH",
                    help="added to every vehicle's start speed in the scenarios [km/h] (default 0)")
     p.add_argument("--dense-check", type=float, metavar="STEP",
-                   help="also evaluate E_hard every STEP (parameter units, e.g. 0.5 deg) over the "
-                   "interval and report whether r* lies in the basin of the best dense point")
+                   help="also evaluate the reference E_ref (E_hard under the deterministic threshold law; "
+                   "its expectation over detection draws, with standard errors, under a probabilistic one) "
+                   "every STEP (parameter units, e.g. 0.5 deg) over the interval and report whether r* "
+                   "lies in the basin of the best dense point")
     p.add_argument("--max-memory-gb", type=float, default=None,
                    help="refuse a run whose estimated memory exceeds this (default: half the machine's memory)")
     p.add_argument("--out", default="out", help="output folder (default: out)")

@@ -32,11 +32,14 @@ class EstimatorConfig:
         kind: "mean-field", "mc" or "hard".
         samples: K, Monte-Carlo samples for "mc" [-].
         relax_temperature: lambda of the relaxed Bernoulli for "mc" [-]; -> 0 gives hard samples.
+        reference_draws: K, Bernoulli draws per (frame, vehicle) of the reference objective
+            E_ref (`Objective.reference`) [-]; unused by a deterministic detection law.
     """
 
     kind: Estimator = "mean-field"
     samples: int = 8
     relax_temperature: float = 0.5
+    reference_draws: int = 32
 
     def __post_init__(self):
         from diffsense.errors import InputError
@@ -45,6 +48,8 @@ class EstimatorConfig:
             raise InputError(f"unknown estimator {self.kind!r} (known: {', '.join(ESTIMATORS)})")
         if self.samples < 1:
             raise InputError(f"estimator samples must be >= 1, got {self.samples}")
+        if self.reference_draws < 2:
+            raise InputError(f"reference_draws must be >= 2 (a standard error needs two), got {self.reference_draws}")
         if not self.relax_temperature > 0.0:
             raise InputError(f"relax_temperature must be > 0, got {self.relax_temperature}")
 

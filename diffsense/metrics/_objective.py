@@ -41,13 +41,14 @@ from jaxtyping import Array, Float, Int
 
 from diffsense.metrics._coverage import coverage_classes, p_tracked, target_window
 from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli
+from diffsense.metrics._reference import ReferenceEvaluation, is_deterministic, reference_uniforms, summarise
 from diffsense.predictors import InputSpec
 from diffsense.scene import Scene
 from diffsense.sensors import Sensor, Weather
 from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import FillPolicy, PredictorInputs, build_inputs, flatten_instants
 
-Mode = Literal["soft", "hard"]
+Mode = Literal["soft", "hard", "reference"]
 Question = Literal["eq12", "tracked"]
 QUESTIONS: tuple[str, ...] = ("eq12", "tracked")
 Params = Mapping[str, Any]
@@ -122,8 +123,10 @@ def weighted_mean(per_variant: Float[Array, " N"], weight: Float[Array, " N"]) -
 class Objective(eqx.Module):
     """E(r) [m] of one sensor and one predictor over a batch of scene variants.
 
-    Call it: `E(r)` (soft, the estimator's value at temperature multiplier `tau`) or
-    `E(r, mode="hard")` (0/1 detections: the reference quality of r). r is a dict of named
+    Call it: `E(r)` (soft, the estimator's value at temperature multiplier `tau`),
+    `E(r, mode="hard")` (0/1 detections, each probability's median) or
+    `E(r, mode="reference")` (E_ref: the hard objective's expectation over detection draws,
+    which the soft objective estimates; `reference` gives its standard error). r is a dict of named
     parameters of the sensor (`{"hfov_deg": 45.0}`); parameters it leaves out keep the
     sensor's defaults. `names` are the problem's free parameters (what a solver varies).
     `weather` (leaves [N], one per variant, like the data) is the scenes' ODD: E is
@@ -153,11 +156,14 @@ class Objective(eqx.Module):
         return self is other
 
     def __call__(self, r: Params, mode: Mode = "soft", tau: float | Array = 1.0) -> Float[Array, ""]:
-        """E [m] at r: soft (the estimator at temperature multiplier `tau`) or hard."""
+        """E [m] at r: soft (the estimator at temperature multiplier `tau`), hard, or the
+        reference (the expectation of the hard objective over detection draws, `reference`)."""
         if mode == "hard":
             return safe_sqrt(self.hard(r).objective)
+        if mode == "reference":
+            return self.reference(r).e
         if mode != "soft":
-            raise ValueError(f"mode must be 'soft' or 'hard', got {mode!r}")
+            raise ValueError(f"mode must be 'soft', 'hard' or 'reference', got {mode!r}")
         return safe_sqrt(self.e2(r, tau))
 
     # -- the pieces ---------------------------------------------------------------------------
@@ -178,7 +184,18 @@ class Objective(eqx.Module):
         return {k: jnp.asarray(v).astype(self.dtype) for k, v in r.items()}
 
     def detections(self, r: Params, mode: Mode = "hard", tau: float | Array = 1.0) -> Detections:
-        """The sensor's detections of every variant at r: [N, T, V]."""
+        """The sensor's detections of every variant at r: [N, T, V].
+
+        "hard" decides each detection by its probability's median (p >= 1/2): a probabilistic
+        detection law's p is that of a random event (`reference` draws it); the threshold law's
+        0/1 are their own median.
+        """
+        det = self._sensor_detections(r, mode, tau)
+        if mode == "hard":
+            det = dataclasses.replace(det, p_detect=(det.p_detect >= 0.5).astype(det.p_detect.dtype))
+        return det
+
+    def _sensor_detections(self, r: Params, mode: Mode, tau: float | Array = 1.0) -> Detections:
         params, tau = self._params(r), jnp.asarray(tau).astype(self.dtype)
         weather = jax.tree.map(lambda v: jnp.asarray(v).astype(self.dtype), self.weather)
         return jax.vmap(lambda s, k, w: self.sensor.detect(s, params, k, mode=mode, temperature=tau, weather=w))(
@@ -264,6 +281,22 @@ class Objective(eqx.Module):
                               sq_instant=jnp.mean(jnp.sum((pred - self.data.gt_pred) ** 2, axis=-1), axis=-1),
                               coverage=coverage, sq_true_gt=sq_true(self.data.gt_pred), sq_true_sensor=sq_true(pred),
                               objective=self._question(pred, coverage[..., 1]))
+
+    def reference(self, r: Params) -> ReferenceEvaluation:
+        """E_ref at r with its Monte-Carlo standard error: the mean of the hard objective over
+        `estimator.reference_draws` detection draws with common random numbers (`_reference.py`)."""
+        if is_deterministic(self.sensor):
+            return summarise(self.hard(r).objective[None])
+        det = self._sensor_detections(r, "hard")
+
+        @jax.checkpoint
+        def one_draw(draw):
+            u = reference_uniforms(self.data.noise_key, draw, det.p_detect.shape[1:], self.dtype)
+            d = dataclasses.replace(det, p_detect=(u < det.p_detect).astype(self.dtype))
+            coverage = jax.vmap(coverage_classes)(self._target_window(d))
+            return self._question(self._predict(d), coverage[..., 1])
+
+        return summarise(jax.lax.map(one_draw, jnp.arange(self.estimator.reference_draws)))
 
     def point(self, values) -> dict[str, Array]:
         """r as a dict from values in the order of `names` (a scalar for one parameter)."""

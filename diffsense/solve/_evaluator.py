@@ -2,9 +2,9 @@
 
 The objective (`diffsense.metrics.Objective`) is pure and stateless; a solve asks for the same
 point more than once (a sweep step again for a figure, the answer's hard value), so the wrapper
-keeps every evaluation by (r, tau), counts the programs actually run, and compiles exactly
-three programs per objective: the soft value-and-gradient, the hard evaluation and the
-detections. The objective is an argument of each program, never a closure, so XLA does not fold
+keeps every evaluation by (r, tau), counts the programs actually run, and compiles one program
+per kind of evaluation it is asked for: the soft value-and-gradient, the hard evaluation, the
+reference (E_ref) and the detections. The objective is an argument of each program, never a closure, so XLA does not fold
 its data in as constants.
 """
 
@@ -30,6 +30,11 @@ def _hard(objective, x):
 
 
 @eqx.filter_jit
+def _reference(objective, x):
+    return objective.reference(objective.point(x))
+
+
+@eqx.filter_jit
 def _detections(objective, x, tau, mode):
     return objective.detections(objective.point(x), mode, tau)
 
@@ -47,6 +52,8 @@ class Evaluator:
         self.counts = {"soft": 0, "hard": 0}
         self._soft: dict[tuple, tuple[float, np.ndarray]] = {}
         self._hard: dict[tuple, Any] = {}
+        self._reference: dict[tuple, Any] = {}
+        self.reference_count = 0  # reference programs run (each K hard passes for a random law)
         self._progress = progress
 
     def _key(self, x) -> tuple[float, ...]:
@@ -73,6 +80,19 @@ class Evaluator:
             if self._progress:
                 self._progress("hard", float(np.sqrt(max(float(out.e2), 0.0))), 0.0)
         return self._hard[key]
+
+    def reference(self, x):
+        """The reference evaluation (`ReferenceEvaluation`, numpy leaves) at x: E_ref and its
+        standard error."""
+        key = self._key(x)
+        if key not in self._reference:
+            self.reference_count += 1
+            self._reference[key] = jax.tree.map(np.asarray, _reference(self.objective, jnp.asarray(key, self.dtype)))
+        return self._reference[key]
+
+    def e_reference(self, x) -> float:
+        """E_ref [m]: the hard objective's expectation over detection draws."""
+        return float(self.reference(x).e)
 
     def hard_points(self) -> list[tuple[float, ...]]:
         """Every point evaluated on the hard objective so far."""

@@ -1,0 +1,118 @@
+"""The reference objective E_ref (`Objective.reference`, `E(r, mode="reference")`): the hard
+objective's expectation over Bernoulli detection draws with common random numbers."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense import config as cfg
+from diffsense import sensors as sensor
+from diffsense._optimise import _dense_check
+from diffsense.errors import InputError
+from diffsense.metrics import EstimatorConfig, make_objective
+from diffsense.metrics._reference import reference_uniforms
+from diffsense.sensors._laws import RadarDetection
+from diffsense.solve import Evaluator
+from diffsense.tracks import prediction_frames
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
+
+H = "hfov_deg"
+SWERLING = sensor.Radar(cfg.replace(sensor.load_config("radar"), detection=RadarDetection(law="swerling1")))
+
+
+def radar_objective(radar=SWERLING, key=None, draws=4, n=1):
+    scenes, scenario = toy_scenes(n)
+    frames = prediction_frames(scenes.num_frames)[:3]
+    return make_objective(scenes, scenario, frames, radar, ToyPredictor(jnp.asarray(TOY_GAIN)), names=(H,),
+                          key=key, estimator=EstimatorConfig(reference_draws=draws), shard=False)
+
+
+reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))
+hard = eqx.filter_jit(lambda o, r: o({H: r}, mode="hard"))
+
+
+@pytest.fixture(scope="module")
+def swerling():
+    return radar_objective()
+
+
+def test_deterministic_law_reference_is_the_hard_objective():
+    obj = radar_objective(sensor.Radar.from_toml())
+    ref = reference(obj, 12.0)
+    assert ref.draws.shape == (1,) and float(ref.e_se) == 0.0
+    assert float(ref.e) == float(hard(obj, 12.0))
+    called = eqx.filter_jit(lambda o, r: o({H: r}, mode="reference"))(obj, 12.0)
+    assert float(called) == pytest.approx(float(ref.e), rel=1e-12)
+
+
+def test_same_seed_same_reference_bit_for_bit(swerling):
+    again = radar_objective()
+    a, b = reference(swerling, 12.0), reference(again, 12.0)
+    np.testing.assert_array_equal(np.asarray(a.draws), np.asarray(b.draws))
+    assert float(a.e) == float(b.e)
+    other = reference(radar_objective(key=jax.random.PRNGKey(5)), 12.0)
+    assert not np.array_equal(np.asarray(other.draws), np.asarray(a.draws))  # the draws come from the key
+
+
+def test_standard_error_of_the_draws(swerling):
+    ref = reference(swerling, 8.0)  # a beam this narrow leaves the target on its edge
+    draws = np.asarray(ref.draws, np.float64)
+    assert draws.shape == (4,) and np.ptp(draws) > 0  # the draws differ: the law is random here
+    assert float(ref.e2) == pytest.approx(draws.mean(), rel=1e-12)
+    assert float(ref.e2_se) == pytest.approx(draws.std(ddof=1) / 2.0, rel=1e-9)
+    assert float(ref.e) == pytest.approx(math.sqrt(draws.mean()), rel=1e-12)
+    assert float(ref.e_se) == pytest.approx(draws.std(ddof=1) / 2.0 / (2 * math.sqrt(draws.mean())), rel=1e-9)
+
+
+def test_draws_are_bernoulli_of_the_sensor_probability(swerling):
+    # The mean of many draws' detections is p within 3 standard errors, vehicle by vehicle.
+    p = np.asarray(swerling._sensor_detections({H: 12.0}, "hard").p_detect)
+    k = 4000
+    u = jax.vmap(lambda d: reference_uniforms(swerling.data.noise_key, d, p.shape[1:], p.dtype))(jnp.arange(k))
+    share = np.mean(np.asarray(u) < p[None], axis=0)
+    edge = (p > 0.05) & (p < 0.95)
+    assert edge.sum() >= 5  # there are (frame, vehicle) pairs on the beam's edge
+    se = np.sqrt(p * (1 - p) / k)
+    assert np.all(np.abs(share - p)[edge] < 3 * se[edge] + 1e-12)
+
+
+def test_hard_mode_is_the_median_detection(swerling):
+    raw = np.asarray(swerling._sensor_detections({H: 12.0}, "hard").p_detect)
+    assert np.any((raw > 0) & (raw < 1))
+    median = np.asarray(swerling.detections({H: 12.0}, "hard").p_detect)
+    np.testing.assert_array_equal(median, (raw >= 0.5).astype(raw.dtype))
+
+
+def test_soft_gradient_matches_float64_central_differences(swerling):
+    vg = eqx.filter_jit(lambda o, r: jax.value_and_grad(lambda x: o.e2({H: x}))(r))
+    for r in (9.0, 16.0):
+        value, grad = vg(swerling, jnp.asarray(r))
+        h = 1e-4
+        fd = (float(vg(swerling, jnp.asarray(r + h))[0]) - float(vg(swerling, jnp.asarray(r - h))[0])) / (2 * h)
+        assert abs(float(grad)) > 1e-6
+        np.testing.assert_allclose(float(grad), fd, rtol=1e-5)
+
+
+def test_evaluator_memoises_the_reference_and_the_dense_check_uses_it(swerling):
+    ev = Evaluator(swerling)
+    first = ev.reference(12.0)
+    assert ev.reference(12.0) is first and ev.reference_count == 1
+    result = SimpleNamespace(r_star=12.0, bracket=(8.0, 16.0))
+    dense = _dense_check(ev, result, 8.0, 16.0, 4.0)
+    assert dense["evaluations"] == 3 and dense["objective"] == "reference" and dense["reference_draws"] == 4
+    best = min((8.0, 12.0, 16.0), key=ev.e_reference)
+    assert dense["r_best"] == best and dense["E_ref_best"] == ev.e_reference(best)
+    assert dense["E_ref_star"] == ev.e_reference(12.0) and dense["E_ref_star_se"] == float(first.e_se)
+    assert ev.reference_count == 3 and ev.counts == {"soft": 0, "hard": 0}
+
+
+def test_reference_draws_must_give_a_standard_error():
+    with pytest.raises(InputError, match="reference_draws must be >= 2"):
+        EstimatorConfig(reference_draws=1)
