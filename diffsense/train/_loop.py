@@ -9,6 +9,7 @@ run needs, so resuming from a checkpoint replays exactly what an uninterrupted r
 from __future__ import annotations
 
 import functools
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -265,6 +266,8 @@ def train(
         },
         "history": history,
         "software": {"jax": jax.__version__, "flax": __import__("flax").__version__, "optax": optax.__version__},
+        "machine": {"platform": jax.default_backend(), "device": jax.devices()[0].device_kind,
+                    "cpu_count": os.cpu_count()},
     }
     from diffsense.predictors._weights import save_weights
 
