@@ -209,3 +209,12 @@ def test_both_laws_ship_off_and_the_paper_profile_keeps_the_threshold():
     for name in ("radar", "camera"):
         for profile in ("physical", "paper"):
             assert sensor.load_config(name, profile=profile).detection.law == "threshold"
+
+
+def test_the_shipped_law_configs_switch_the_law_and_nothing_else():
+    from pathlib import Path
+
+    laws = Path(__file__).resolve().parents[1] / "configs" / "sensors" / "laws"
+    radar = sensor.Radar.from_toml(laws / "radar_swerling1.toml").config
+    camera = sensor.Camera.from_toml(laws / "camera_confidence.toml").config
+    assert radar == RADAR and camera == CAMERA
