@@ -36,7 +36,8 @@ def breakdown(hard: Any, scenario: np.ndarray, weight: np.ndarray, scenario_name
               horizon_s: Sequence[float]) -> dict[str, Any]:
     """The breakdown of one hard evaluation (numpy `HardEvaluation` [N, I, ...] arrays).
 
-    Returns {"E_hard", "by_scenario": {name: {"E_hard", "coverage"}}, "coverage": {...},
+    Returns {"E_hard", "by_scenario": {name: {"E_hard", "coverage", "E_tracked", "missed_share"}},
+    "coverage": {...},
     "by_horizon": {"t_s", "E_hard", "rmse_true_gt", "rmse_true_sensor"}}; coverage holds the
     shares of instants "at_instant", "in_window", "throughout" and "parts": the partition
     {"throughout", "partly", "never"} with each part's share and E_hard [m].
@@ -47,7 +48,8 @@ def breakdown(hard: Any, scenario: np.ndarray, weight: np.ndarray, scenario_name
     by_scenario = {}
     for s, name in enumerate(scenario_names):
         mine = np.asarray(scenario) == s
-        by_scenario[name] = {"E_hard": _rms(sq[mine], w[mine]), "coverage": _coverage(sq[mine], classes[mine], w[mine])}
+        by_scenario[name] = {"E_hard": _rms(sq[mine], w[mine]), "coverage": _coverage(sq[mine], classes[mine], w[mine]),
+                             **_tracked_part(sq[mine], classes[mine, ..., 1], w[mine])}
     wn = np.asarray(weight, np.float64)[:, None]
     wi = w[..., None]
     return {
@@ -63,18 +65,25 @@ def breakdown(hard: Any, scenario: np.ndarray, weight: np.ndarray, scenario_name
     }
 
 
+def _tracked_part(sq: np.ndarray, tracked: np.ndarray, w: np.ndarray) -> dict[str, Any]:
+    """E over the instants whose target is tracked (detected in the window) [m] and the share of
+    instants that are not, of the instants in `sq` / `tracked` / `w` (same shapes)."""
+    seen = float(np.sum(w * tracked))
+    e_tracked = float(np.sqrt(float(np.sum(w * tracked * sq)) / seen)) if seen > 0 else None
+    return {"E_tracked": e_tracked, "missed_share": 1.0 - seen / float(np.sum(w))}
+
+
 def tracked_summary(hard: Any, weight: np.ndarray, miss_penalty_m2: float) -> dict[str, Any]:
     """The "tracked" question's pieces at one hard evaluation: E over the tracked instants [m],
     the missed share and J [m^2] (with the objective's one pseudo-instant of zero error)."""
     sq = np.asarray(hard.sq_instant, np.float64)
     tracked = np.asarray(hard.coverage, np.float64)[..., 1]
     w = np.broadcast_to(np.asarray(weight, np.float64)[:, None], sq.shape)
+    part = _tracked_part(sq, tracked, w)
     seen = float(np.sum(w * tracked))
-    missed = 1.0 - seen / float(np.sum(w))
     error = float(np.sum(w * tracked * sq))
-    e_tracked = float(np.sqrt(error / seen)) if seen > 0 else None
-    return {"E_tracked": e_tracked, "missed_share": missed, "J_m2": error / (1.0 + seen) + miss_penalty_m2 * missed,
-            "miss_penalty_m2": miss_penalty_m2}
+    return part | {"J_m2": error / (1.0 + seen) + miss_penalty_m2 * part["missed_share"],
+                   "miss_penalty_m2": miss_penalty_m2}
 
 
 __all__ = ["COVERAGE_PARTS", "breakdown", "tracked_summary"]

@@ -81,6 +81,16 @@ class Evaluator:
                 self._progress("hard", float(np.sqrt(max(float(out.e2), 0.0))), 0.0)
         return self._hard[key]
 
+    def breakdown(self, x) -> dict[str, Any]:
+        """E_hard at x broken down by scenario, horizon step and coverage, with the "tracked"
+        question's figures pooled (`"tracked"`) and per scenario; layout of result.json's."""
+        from diffsense._breakdown import breakdown, tracked_summary
+
+        E, hard = self.objective, self.hard(x)
+        scenario, weight = np.asarray(E.data.scenario), np.asarray(E.data.weight)
+        out = breakdown(hard, scenario, weight, E.scenario_names, E.spec.horizon_s())
+        return out | {"tracked": tracked_summary(hard, weight, float(E.miss_penalty_m2))}
+
     def reference(self, x):
         """The reference evaluation (`ReferenceEvaluation`, numpy leaves) at x: E_ref and its
         standard error."""
