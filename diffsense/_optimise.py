@@ -28,6 +28,7 @@ from diffsense.errors import InputError
 from diffsense.metrics import Objective, SpeedShiftedScenes, make_objective, recorded_scenes, speed_shifted_scenes
 from diffsense.predictors import load_predictor
 from diffsense.sensors import Weather
+from diffsense.sensors._mount import relevance_stand_ins
 from diffsense.scene import ROLE_NAMES
 from diffsense.solve import Evaluator, basin_check, default_steps, dense_grid_search, hard_grid_solve, solve
 from diffsense.tracks import prediction_frames
@@ -59,7 +60,8 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))[1]  # [0] is the scenes' (traffic_scenes)
     if problem.scenes is not None:
         scenes, index, names, weather = recorded_scenes(
-            problem.scenes, spec=predictor.spec, sensors=[sensor], stride_frames=problem.prediction_stride_frames,
+            problem.scenes, spec=predictor.spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
+            stride_frames=problem.prediction_stride_frames,
             dtype=dtype)
     else:
         shifted, index, names, weather = traffic_scenes(problem, predictor.spec, sensor, dtype)
@@ -76,7 +78,7 @@ def traffic_scenes(problem: Problem, spec, sensor, dtype) -> tuple[SpeedShiftedS
     them at the problem's own; `diffsense.sensitivity` differentiates them)."""
     scene_key = jax.random.split(jax.random.PRNGKey(problem.seed))[0]
     return speed_shifted_scenes(
-        problem.scenarios, problem.variants, scene_key, spec=spec, sensors=[sensor],
+        problem.scenarios, problem.variants, scene_key, spec=spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
         stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
         dtype=dtype, speed_offset_kmh=problem.traffic_speed_offset_kmh)
 

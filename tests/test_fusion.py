@@ -170,7 +170,8 @@ def test_gradients_finite_at_extremes_in_float32():
 def test_suite_names_specs_and_refusals():
     assert SUITE.kind == "suite" and SUITE.mount_x_m == 4.2
     names = [s.name for s in SUITE.param_specs()]
-    assert names[:2] == ["radar.hfov_deg", "radar.vfov_deg"] and "camera.width_px" in names and len(names) == 9
+    # 5 radar and 4 camera parameters of their own, and 3 of mounting each
+    assert names[:2] == ["radar.hfov_deg", "radar.vfov_deg"] and "camera.width_px" in names and len(names) == 15
     assert SUITE.spec("camera.width_px").unit == "px"
     with pytest.raises(InputError, match="unknown suite parameter 'hfov_deg'"):
         SUITE.spec("hfov_deg")

@@ -19,10 +19,13 @@ from diffsense.scene import CAR, TRUCK
 KEY = jax.random.key(3, impl="rbg")  # threefry compiles ~3 s slower on CPU
 # Points where every parameter matters (no gate saturated for all vehicles): the camera at
 # 120 deg resolves a car only to ~110 m, so its pixel gate is live near the 100 m range edge.
+# The mounting is turned and moved off its defaults (0 deg, 4.2 / 2.5 m ahead, 0 m aside), so that
+# its derivatives are taken away from the exact zeros the defaults hold.
 POINTS = {
     "radar": {"hfov_deg": 30.0, "vfov_deg": 15.0, "range_m": 100.0, "tx_power_dbm": 14.0,
-              "noise_figure_db": 4.8},
-    "camera": {"hfov_deg": 120.0, "range_m": 100.0, "width_px": 1280.0, "baseline_m": 0.12},
+              "noise_figure_db": 4.8, "yaw_deg": 3.0, "mount_x_m": 4.0, "mount_y_m": 0.3},
+    "camera": {"hfov_deg": 120.0, "range_m": 100.0, "width_px": 1280.0, "baseline_m": 0.12,
+               "yaw_deg": -2.0, "mount_x_m": 2.2, "mount_y_m": -0.2},
 }
 
 
@@ -133,7 +136,9 @@ def test_values_and_gradients_are_finite_at_the_extremes(name, dtype):
     np.testing.assert_array_equal(empty[1].p_detect, 1.0)  # the ego alone
     hard_p = np.asarray(hard)
     assert set(np.unique(hard_p)) <= {0.0, 1.0}
-    narrower = raw["hfov_deg"] < 360.0  # only a full circle sees straight behind
+    # Only a full circle, or a sensor turned to look back (yaw at its +-180 deg extremes), sees
+    # straight behind.
+    narrower = (raw["hfov_deg"] < 360.0) & (np.abs(raw["yaw_deg"]) < 90.0)
     assert np.all(hard_p[narrower][:, :, 4] == 0)  # behind both sensors
     if name == "camera":
         assert np.all(hard_p[:, :, 6] == 0)  # hidden behind the truck

@@ -41,7 +41,10 @@ def test_gradient_of_e_plus_cost_for_every_parameter(evaluator):
     cost_vg = jax.jit(jax.value_and_grad(cost))
     r0 = {"radar.hfov_deg": 60.0, "radar.vfov_deg": 12.0, "radar.range_m": 60.0, "radar.tx_power_dbm": 10.0,
           "radar.noise_figure_db": 6.0, "camera.hfov_deg": 50.0, "camera.range_m": 45.0,
-          "camera.width_px": 900.0, "camera.baseline_m": 0.2}
+          "camera.width_px": 900.0, "camera.baseline_m": 0.2,
+          # The mounting: turned, moved back and aside from the defaults (0 deg, 4.2 / 2.5 m, 0 m).
+          "radar.yaw_deg": 4.0, "radar.mount_x_m": 3.6, "radar.mount_y_m": 0.4,
+          "camera.yaw_deg": -3.0, "camera.mount_x_m": 1.5, "camera.mount_y_m": -0.3}
     x0 = np.array([r0[n] for n in names])
 
     def j(x):  # E + lambda * cost and its gradient; E = sqrt(E^2), dE = dE^2 / (2 E)
@@ -60,14 +63,18 @@ def test_gradient_of_e_plus_cost_for_every_parameter(evaluator):
         fd = (j(up)[0] - j(down)[0]) / (2 * h)
         np.testing.assert_allclose(grad[i], fd, rtol=1e-5, atol=1e-10, err_msg=name)
         live += abs(evaluator.value_and_grad(x0, 3.0)[1][i]) > 1e-8
-    assert live >= 5  # E itself depends on most parameters here, not only the cost
+    assert live >= 11  # E itself depends on most parameters here (the mounting included), not only the cost
 
 
 def test_box_solve_through_the_evaluator(evaluator):
     names = evaluator.objective.names
     cost = make_cost(load_costs(), SUITE)
     fns = BoxFunctions.from_evaluator(evaluator, cost=cost)
-    bounds = {n: (0.5 * SUITE.spec(n).default, 2.0 * SUITE.spec(n).default) for n in names}
+    # Half to twice each default; the mounting (defaults 0 or on the envelope's front edge) moves
+    # by up to 5 deg and 0.5 m instead.
+    mounting = {"yaw_deg": (-5.0, 5.0), "mount_x_m": (-0.5, 0.0), "mount_y_m": (-0.5, 0.5)}
+    bounds = {n: tuple(SUITE.spec(n).default + d for d in mounting[n.split(".")[1]]) if n.split(".")[1] in mounting
+              else (0.5 * SUITE.spec(n).default, 2.0 * SUITE.spec(n).default) for n in names}
     before = dict(evaluator.counts)
     result = box_solve(fns, bounds, BoxConfig(samples=4, starts=1, tau_schedule=(2.0, 1.0), max_steps=3,
                                               cost_weight=LAMBDA))

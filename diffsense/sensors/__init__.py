@@ -7,7 +7,8 @@
 Lower-level physics entry points: `detect(scene, params, config, key, mode=...)` -> `Detections` [T, V] (and
 `detect_batch` over [N, T, V]); `p_detect` for the probabilities alone. Parameters r are small
 pytrees (`RadarParams`, `CameraParams`); constants come from `configs/sensors/*.toml` via
-`load_config`. `param_specs` lists a sensor's differentiable parameters with their domains.
+`load_config`. `param_specs` lists a sensor's differentiable parameters with their domains,
+the mounting (`MOUNT_NAMES`: yaw_deg, mount_x_m, mount_y_m) among them.
 """
 
 from diffsense.sensors._camera import (
@@ -20,6 +21,7 @@ from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._detect import detect, detect_batch, p_detect
 from diffsense.sensors._gates import MODES
 from diffsense.sensors._measure import measurement_noise
+from diffsense.sensors._mount import MOUNT_NAMES, Mount
 from diffsense.sensors._params import (
     SENSORS,
     CameraConfig,
@@ -49,7 +51,7 @@ from diffsense.sensors._radar import (
 
 __all__ = [
     "CLEAR", "Camera", "Radar", "Sensor", "Suite", "Weather", "make_sensor", "register", "sensor_names",
-    "MODES", "SENSORS", "CameraConfig", "CameraParams", "CameraTemperatures", "Detections",
+    "MODES", "MOUNT_NAMES", "Mount", "SENSORS", "CameraConfig", "CameraParams", "CameraTemperatures", "Detections",
     "ParamSpec", "RadarConfig", "RadarParams", "RadarTemperatures", "camera_depth_sigma_m",
     "camera_detect", "camera_p_detect", "camera_px_per_rad", "check_params", "detect",
     "detect_batch", "load_config", "make_params", "measurement_noise", "p_detect", "param_specs",

@@ -30,6 +30,7 @@ from diffsense.sensors._laws import (
     log_confidence_above,
     log_reported_below,
 )
+from diffsense.sensors._mount import mount_of
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensors._params import CameraConfig, CameraParams
 from diffsense.sensors._weather import CLEAR, Weather
@@ -68,9 +69,10 @@ def _confidence_log_p(width_px, visible, limit_m, range_m, depth_sigma_m, config
 
 def _camera_terms(tracks: Tracks, params: CameraParams, config: CameraConfig, mode: Mode,
                   temperature, weather: Weather = CLEAR):
-    range_m, azimuth_rad = polar(tracks, config.mount_x_m)
+    mount = mount_of(params, config)
+    range_m, azimuth_rad = polar(tracks, mount)
     tau = config.temperature
-    half, hidden = vehicle_occlusion(tracks, range_m, azimuth_rad, config.mount_x_m, mode,
+    half, hidden = vehicle_occlusion(tracks, range_m, azimuth_rad, mount, mode,
                                      tau.near_m * temperature, tau.overlap_deg * temperature)
     k = camera_px_per_rad(params)
     # Fog and rain cap the range at Koschmieder's contrast range (+inf in clear weather, so

@@ -1,8 +1,9 @@
 """Where each vehicle is as seen from a sensor mounted on the ego, and back to the world.
 
-The sensor sits `mount_x_m` ahead of the ego reference point along the ego heading and faces
-forward. Polar coordinates in the sensor frame: range [m] and azimuth [rad] (counter-clockwise,
-0 = straight ahead, in [-pi, pi]). Every norm, angle and division is safe at zero (a vehicle
+The sensor sits at its `Mount` on the ego (x ahead of the ego's reference point, y to its left,
+boresight turned by the yaw; a bare number is `mount_x_m` on the centre line, facing forward).
+Polar coordinates in the sensor frame: range [m] and azimuth [rad] (counter-clockwise from the
+boresight, in [-pi, pi]). Every norm, angle and division is safe at zero (a vehicle
 co-located with the sensor, padding of zero size), so gradients stay finite.
 
 The models work vehicle-major, arrays [V, T] (pairs [V, V, T]): time is the long minor axis, which
@@ -20,6 +21,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from diffsense.scene import EGO_INDEX, Scene
 from diffsense.sensors._gates import Mode, soft_less, soft_ramp
+from diffsense.sensors._mount import Mount, as_mount, is_static_zero
 
 
 @jax.tree_util.register_dataclass
@@ -43,11 +45,18 @@ class Tracks:
                    kind=scene.kind[:, None], present=scene.present[:, None] != 0)
 
 
-def sensor_pose(tracks: Tracks, mount_x_m: float):
-    """World position and yaw of the sensor per frame: (x_m [T], y_m [T], yaw_rad [T])."""
-    yaw = tracks.heading_rad[EGO_INDEX]
-    x = tracks.x_m[EGO_INDEX] + mount_x_m * jnp.cos(yaw)
-    y = tracks.y_m[EGO_INDEX] + mount_x_m * jnp.sin(yaw)
+def sensor_pose(tracks: Tracks, mount: Mount | float):
+    """World position and boresight yaw of the sensor per frame: (x_m [T], y_m [T], yaw_rad [T])."""
+    mount = as_mount(mount)
+    heading = tracks.heading_rad[EGO_INDEX]
+    c, s = jnp.cos(heading), jnp.sin(heading)
+    x = tracks.x_m[EGO_INDEX] + mount.x_m * c
+    y = tracks.y_m[EGO_INDEX] + mount.x_m * s
+    # A static zero offset or yaw is skipped, not added: a default mounting then compiles to the
+    # program (and numbers) of the forward-facing centre-line sensor, bit for bit.
+    if not is_static_zero(mount.y_m):
+        x, y = x - mount.y_m * s, y + mount.y_m * c
+    yaw = heading if is_static_zero(mount.yaw_rad) else heading + mount.yaw_rad
     return x, y, yaw
 
 
@@ -88,9 +97,9 @@ def wrap_angle(a: Float[Array, "..."]) -> Float[Array, "..."]:
     return a - (2 * jnp.pi) * jnp.round(a / (2 * jnp.pi))
 
 
-def polar(tracks: Tracks, mount_x_m: float):
+def polar(tracks: Tracks, mount: Mount | float):
     """Range [m] and azimuth [rad] of every vehicle centre from the sensor, each [V, T]."""
-    sx, sy, yaw = sensor_pose(tracks, mount_x_m)
+    sx, sy, yaw = sensor_pose(tracks, mount)
     dx = tracks.x_m - sx
     dy = tracks.y_m - sy
     c, s = jnp.cos(yaw), jnp.sin(yaw)
@@ -99,14 +108,14 @@ def polar(tracks: Tracks, mount_x_m: float):
     return safe_norm(forward, left), safe_atan2(left, forward)
 
 
-def to_world(tracks: Tracks, mount_x_m: float, range_m, azimuth_error_rad):
+def to_world(tracks: Tracks, mount: Mount | float, range_m, azimuth_error_rad):
     """World (x_m, y_m) [V, T] of a measured range along each vehicle's line of sight, turned
     by the azimuth error, with the ego's own pose.
 
     The turn is the Cayley rotation of the error e (cos, sin = (1 - q^2, 2 q) / (1 + q^2), q = e/2):
     an exact rotation by 2 atan(e / 2) = e - e^3 / 12 + ..., without trigonometric calls.
     """
-    sx, sy, yaw = sensor_pose(tracks, mount_x_m)
+    sx, sy, yaw = sensor_pose(tracks, mount)
     dx = tracks.x_m - sx
     dy = tracks.y_m - sy
     r = safe_norm(dx, dy)
@@ -120,13 +129,13 @@ def to_world(tracks: Tracks, mount_x_m: float, range_m, azimuth_error_rad):
     return (sx + range_m * (cos_e * ux - sin_e * uy), sy + range_m * (sin_e * ux + cos_e * uy))
 
 
-def angular_half_width(tracks: Tracks, range_m, azimuth_rad, mount_x_m: float):
+def angular_half_width(tracks: Tracks, range_m, azimuth_rad, mount: Mount | float):
     """Half the angle [rad] a vehicle's footprint subtends at the sensor, [V, T].
 
     The footprint's extent across the line of sight is |L sin(rel)| + |W cos(rel)| with rel the
     body yaw relative to the line of sight; the angle stays finite (pi/2) at zero range.
     """
-    _, _, yaw = sensor_pose(tracks, mount_x_m)
+    _, _, yaw = sensor_pose(tracks, mount)
     rel = tracks.heading_rad - (yaw + azimuth_rad)
     across = jnp.abs(tracks.length_m * jnp.sin(rel)) + jnp.abs(tracks.width_m * jnp.cos(rel))
     return safe_atan2(0.5 * across, range_m)
@@ -166,13 +175,13 @@ def occluded_fraction(
     return jnp.minimum(frac, 1.0)
 
 
-def vehicle_occlusion(tracks: Tracks, range_m, azimuth_rad, mount_x_m: float, mode: Mode,
+def vehicle_occlusion(tracks: Tracks, range_m, azimuth_rad, mount: Mount | float, mode: Mode,
                       tau_near_m, tau_overlap_deg):
     """Angular half-width [rad] and occluded fraction of every vehicle, each [V, T].
 
     Occluders are the present vehicles other than the ego.
     """
-    half = angular_half_width(tracks, range_m, azimuth_rad, mount_x_m)
+    half = angular_half_width(tracks, range_m, azimuth_rad, mount)
     occluder = tracks.present & (jnp.arange(tracks.x_m.shape[0]) != EGO_INDEX)[:, None]
     return half, occluded_fraction(range_m, azimuth_rad, half, occluder, mode, tau_near_m,
                                    jnp.deg2rad(tau_overlap_deg))

@@ -19,6 +19,7 @@ from diffsense.sensors._weather import CLEAR
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import check_mode, check_temperature, p_from_gates
 from diffsense.sensors._geometry import Tracks, to_world
+from diffsense.sensors._mount import mount_of
 
 KeyOrNoise = PRNGKeyArray | Float[Array, "2 T V"]
 
@@ -84,7 +85,7 @@ def detect_of(terms, scene: Scene, params, config, key_or_noise: KeyOrNoise, mod
     tracks = tracks_of(scene)
     noise = jax.lax.optimization_barrier(jnp.swapaxes(_noise(key_or_noise, scene), -1, -2))
     gates, range_m, _, range_sigma, azimuth_sigma = terms(tracks, params, config, mode, temperature, weather)
-    x, y = to_world(tracks, config.mount_x_m, range_m + range_sigma * noise[0],
+    x, y = to_world(tracks, mount_of(params, config), range_m + range_sigma * noise[0],
                     azimuth_sigma * noise[1])
     known = (jnp.arange(x.shape[0]) == EGO_INDEX)[:, None] | ~tracks.present
     x = jnp.where(known, tracks.x_m, x)

@@ -31,6 +31,7 @@ from diffsense.sensors._camera import _camera_terms
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import check_mode, check_temperature, p_from_gates
 from diffsense.sensors._geometry import safe_norm, sensor_pose, to_world
+from diffsense.sensors._mount import Mount, mount_of
 from diffsense.sensors._measure import KeyOrNoise, _noise, _transposed, own_and_padding, tracks_of
 from diffsense.sensors._params import CameraParams, RadarParams
 from diffsense.sensors._radar import _radar_terms
@@ -62,10 +63,10 @@ class Covariance:
         return self.xx * self.yy - self.xy * self.xy
 
 
-def line_of_sight_covariance(tracks, mount_x_m: float, range_m, along_sigma_m, across_sigma_rad) -> Covariance:
+def line_of_sight_covariance(tracks, mount: Mount | float, range_m, along_sigma_m, across_sigma_rad) -> Covariance:
     """World covariance [T, V] of a range measured with sigma `along_sigma_m` [m] along the line
     of sight and turned by an angle error of sigma `across_sigma_rad` [rad]; arrays [V, T] in."""
-    sx, sy, yaw = sensor_pose(tracks, mount_x_m)
+    sx, sy, yaw = sensor_pose(tracks, mount)
     dx, dy = tracks.x_m - sx, tracks.y_m - sy
     r = safe_norm(dx, dy)
     ok = r > 0
@@ -90,13 +91,14 @@ def _physics_view(terms, scene: Scene, params, config, noise: KeyOrNoise, mode, 
     tracks = tracks_of(scene)
     eps = jax.lax.optimization_barrier(jnp.swapaxes(_noise(noise, scene), -1, -2))
     gates, range_m, _, range_sigma, azimuth_sigma = terms(tracks, params, config, mode, temperature, weather)
-    x, y = to_world(tracks, config.mount_x_m, range_m + range_sigma * eps[0], azimuth_sigma * eps[1])
+    mount = mount_of(params, config)
+    x, y = to_world(tracks, mount, range_m + range_sigma * eps[0], azimuth_sigma * eps[1])
     known = (jnp.arange(x.shape[0]) == EGO_INDEX)[:, None] | ~tracks.present
     x = jnp.where(known, tracks.x_m, x)
     y = jnp.where(known, tracks.y_m, y)
     det = Detections(p_detect=own_and_padding(tracks, p_from_gates(gates, mode)),
                      x_m=_transposed(x), y_m=_transposed(y))
-    return det, line_of_sight_covariance(tracks, config.mount_x_m, range_m, range_sigma, azimuth_sigma)
+    return det, line_of_sight_covariance(tracks, mount, range_m, range_sigma, azimuth_sigma)
 
 
 def member_view(sensor: Sensor, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode, temperature,

@@ -25,6 +25,7 @@ import jax
 from diffsense import config as _config
 from diffsense.errors import InputError
 from diffsense.sensors._laws import CameraDetection, RadarDetection
+from diffsense.sensors._mount import MOUNT_DOMAINS, check_mount
 
 SensorName = Literal["radar", "camera"]
 SENSORS: tuple[str, ...] = ("radar", "camera")
@@ -41,6 +42,7 @@ class RadarParams:
         range_m: maximum instrumented range [m].
         tx_power_dbm: transmit power [dBm].
         noise_figure_db: receiver noise figure [dB].
+        yaw_deg, mount_x_m, mount_y_m: the mounting (`diffsense.sensors._mount`); None: the config's.
     """
 
     hfov_deg: float
@@ -48,6 +50,9 @@ class RadarParams:
     range_m: float
     tx_power_dbm: float
     noise_figure_db: float
+    yaw_deg: float | None = None
+    mount_x_m: float | None = None
+    mount_y_m: float | None = None
 
 
 @jax.tree_util.register_dataclass
@@ -60,12 +65,16 @@ class CameraParams:
         range_m: maximum detection range [m].
         width_px: horizontal image resolution [px] (continuous relaxation of an integer).
         baseline_m: stereo baseline [m].
+        yaw_deg, mount_x_m, mount_y_m: the mounting (`diffsense.sensors._mount`); None: the config's.
     """
 
     hfov_deg: float
     range_m: float
     width_px: float
     baseline_m: float
+    yaw_deg: float | None = None
+    mount_x_m: float | None = None
+    mount_y_m: float | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,13 +111,13 @@ _DOMAINS: dict[str, dict[str, tuple[str, float, float, bool, str]]] = {
         "range_m": ("m", 0.0, 1000.0, True, "maximum range"),
         "tx_power_dbm": ("dBm", -30.0, 40.0, False, "transmit power"),
         "noise_figure_db": ("dB", 0.0, 30.0, False, "receiver noise figure"),
-    },
+    } | MOUNT_DOMAINS,
     "camera": {
         "hfov_deg": ("deg", 0.0, 360.0, True, "horizontal field of view"),
         "range_m": ("m", 0.0, 1000.0, True, "maximum detection range"),
         "width_px": ("px", 1.0, 16384.0, False, "horizontal resolution"),
         "baseline_m": ("m", 0.0, 2.0, True, "stereo baseline"),
-    },
+    } | MOUNT_DOMAINS,
 }
 
 
@@ -184,9 +193,12 @@ class RadarConfig:
     gain_follows_hfov: bool = True
     gain_beam_deg: float = 30.0
     detection: RadarDetection = RadarDetection()  # the detection law (`_laws.py`)
+    mount_y_m: float = 0.0
+    yaw_deg: float = 0.0
 
     def __post_init__(self):
         check_params(self.params)
+        check_mount("radar", self)
         for name in ("frequency_ghz", "noise_bandwidth_hz", "antenna_efficiency"):
             _require(getattr(self, name) > 0, f"radar {name} must be > 0")
         _require(self.antenna_efficiency <= 1, "radar antenna_efficiency must be <= 1")
@@ -226,9 +238,12 @@ class CameraConfig:
     accuracy_follows_hfov: bool = True
     focal_length_px: float = 2400.0
     detection: CameraDetection = CameraDetection()  # the detection law (`_laws.py`)
+    mount_y_m: float = 0.0
+    yaw_deg: float = 0.0
 
     def __post_init__(self):
         check_params(self.params)
+        check_mount("camera", self)
         for name in ("disparity_error_px", "bearing_error_px", "min_width_px"):
             _require(getattr(self, name) >= 0, f"camera {name} must be >= 0")
         _require(self.focal_length_px > 0, "camera focal_length_px must be > 0")
@@ -239,6 +254,12 @@ class CameraConfig:
 def _require(ok: bool, message: str) -> None:
     if not ok:
         raise InputError(message)
+
+
+def default_value(config: Any, name: str) -> float:
+    """The default of parameter `name`: the config's `params`, or its mounting for those."""
+    value = getattr(config.params, name)
+    return float(getattr(config, name) if value is None else value)
 
 
 def _check_positive(what: str, obj: Any) -> None:
@@ -279,7 +300,7 @@ def param_specs(
     sensor = _sensor_name(sensor)
     config = load_config(sensor) if config is None else config
     return tuple(
-        ParamSpec(name, unit, lo, hi, lo_open, float(getattr(config.params, name)), doc)
+        ParamSpec(name, unit, lo, hi, lo_open, default_value(config, name), doc)
         for name, (unit, lo, hi, lo_open, doc) in _DOMAINS[sensor].items()
     )
 

@@ -28,6 +28,7 @@ from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
 from diffsense.sensors._laws import LogProbability, gaussian_beam_loss_db, log_reported_below, swerling1_log_pd
+from diffsense.sensors._mount import mount_of
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
 from diffsense.sensors._params import RadarConfig, RadarParams
 from diffsense.sensors._weather import CLEAR, Weather
@@ -69,9 +70,10 @@ def radar_rcs_dbsm(kind: Int[Array, "V"], config: RadarConfig) -> Float[Array, "
 
 def _radar_terms(tracks: Tracks, params: RadarParams, config: RadarConfig, mode: Mode, temperature,
                  weather: Weather = CLEAR):
-    range_m, azimuth_rad = polar(tracks, config.mount_x_m)
+    mount = mount_of(params, config)
+    range_m, azimuth_rad = polar(tracks, mount)
     tau = config.temperature
-    _, shadow = vehicle_occlusion(tracks, range_m, azimuth_rad, config.mount_x_m, mode,
+    _, shadow = vehicle_occlusion(tracks, range_m, azimuth_rad, mount, mode,
                                   tau.near_m * temperature, tau.overlap_deg * temperature)
     rcs = radar_rcs_dbsm(tracks.kind, config).astype(range_m.dtype)  # [V, 1]
     snr_db = radar_snr_db(range_m, rcs, params, config)
