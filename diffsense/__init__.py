@@ -6,6 +6,7 @@
     E = ds.objective(problem)                                  # pure: jit, grad, vmap
     value, grad = jax.value_and_grad(E)({"hfov_deg": 45.0})    # E [m]; grad is a dict like r
     result = ds.optimise(problem)                              # the main job; result.r_star
+    front = ds.pareto(ds.Problem.from_suite("configs/suites/radar_camera_d4.toml"))  # E vs cost
 
 Pipeline (one subpackage per stage, data flowing one way):
     scene -> sensors -> tracks -> predictors -> metrics -> solve -> report
@@ -19,10 +20,11 @@ from diffsense._optimise import objective, optimise
 from diffsense._problem import Problem
 from diffsense._result import Result
 from diffsense._sensitivity import sensitivity
+from diffsense._suite_solve import ParetoFront, pareto
 from diffsense.errors import InputError
 from diffsense.metrics import Objective
 
 __all__ = [
-    "InputError", "Objective", "Problem", "Result", "__version__", "objective", "optimise",
-    "predictors", "sensitivity", "sensors",
+    "InputError", "Objective", "ParetoFront", "Problem", "Result", "__version__", "objective", "optimise",
+    "pareto", "predictors", "sensitivity", "sensors",
 ]

@@ -119,47 +119,6 @@ def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: in
                   timeline_roles=tuple(ROLE_NAMES[int(first.role[v])] for v in cols), dt_s=float(first.dt_s))
 
 
-def _optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Progress,
-                  on_evaluation: Callable[[dict], None] | None) -> Result:
-    """Many parameters (or a cost): the box solve (`diffsense.solve.box_solve`): a coarse hard
-    sample, BFGS with temperature continuation from its best points, every answer checked on the
-    hard objective J = E_hard + cost_weight * cost."""
-    from diffsense.metrics._cost import load_costs, make_cost
-    from diffsense.solve import BoxFunctions, box_solve
-
-    with CompileClock() as clock:
-        say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
-        E = objective(problem, predictor=predictor) if E is None else E
-        planned = problem.box.max_soft + (problem.box.samples or 2 * len(problem.params) + 2)
-
-        def counted(kind: str, e_m: float, tau: float) -> None:
-            if on_evaluation is not None:
-                on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": sum(ev.counts.values()), "planned": planned})
-
-        ev = Evaluator(E, progress=counted)
-        domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
-        sensor = E.sensor
-        cost = make_cost(load_costs(problem.costs), sensor)
-        say(f"{problem.sensor_kind}: box solve of {', '.join(problem.params)}")
-        defaults = sensor.defaults()
-        start = [min(max(defaults[n], lo), hi) for n, (lo, hi) in problem.params.items()]
-        box = box_solve(BoxFunctions.from_evaluator(ev, cost=cost), problem.params,
-                        dataclasses.replace(problem.box, cost_weight=problem.cost_weight, seed=problem.seed),
-                        extra_starts=[start])
-        x = [box.x_star[n] for n in E.names]
-        parts = {"breakdown": breakdown(ev.hard(x), np.asarray(E.data.scenario), np.asarray(E.data.weight),
-                                        E.scenario_names, E.spec.horizon_s())}
-    notes = tuple(f"{n} is on its {side} bound" for n, side in box.on_bound.items() if side)
-    if domain_note(domain):
-        notes += (domain_note(domain),)
-    return Result(
-        sensor=problem.sensor_kind, params=dict(problem.params), units={n: s.unit for n, s in problem.specs().items()},
-        r_star=dict(box.x_star), E_hard_star=float(box.E_hard), E_soft_star=float(box.E_soft), solve=None, box=box,
-        programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
-        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
-        scenarios=tuple(E.scenario_names), config=_config(problem), domain=domain, box_notes=notes, **parts)
-
-
 def _breakdowns(ev: Evaluator, E: Objective, result, miss_penalty_m2: float) -> dict[str, Any]:
     """The breakdown at r* and at every sweep step, and the tracked question's pieces at r*."""
     scenario, weight = np.asarray(E.data.scenario), np.asarray(E.data.weight)
@@ -240,7 +199,9 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
 
         check_theta(problem, sensitivity)
     if len(problem.params) != 1 or problem.cost_weight > 0:
-        return _optimise_box(problem, E, predictor, say, on_evaluation)
+        from diffsense._suite_solve import optimise_box
+
+        return optimise_box(problem, E, predictor, say, on_evaluation)
     (name, (lo, hi)), = problem.params.items()
     spec = problem.specs()[name]
     hard_only = problem.estimator.kind == "hard"

@@ -177,6 +177,16 @@ class Problem:
         file). Keys the file leaves out keep the shipped defaults; `overrides` replace fields."""
         return cls(**problem_fields(load_settings(path)) | overrides)
 
+    @classmethod
+    def from_suite(cls, path: str | Path, **overrides: Any) -> Problem:
+        """A suite design problem from a suite file (`configs/suites/*.toml`: its sensors, free
+        parameters with bounds and cost weight; layout in `diffsense._suite_file`). `overrides`
+        replace fields (scenarios, variants, ...); a refusal names the file."""
+        from diffsense._suite_file import checked, load_suite
+
+        fields = load_suite(path)
+        return checked(path, lambda: cls(**fields | overrides))
+
 
 WEATHER_DOMAINS = {"rain_mm_h": (0.0, 500.0), "fog_visibility_m": (1.0, math.inf)}
 

@@ -113,7 +113,18 @@ def test_cost_weight_moves_the_minimum_as_computed_by_hand():
     assert result.x_star["x"] == pytest.approx(8.0 - 7.5, abs=1e-4)
     assert result.cost == pytest.approx(0.5, abs=1e-4)
     assert result.J_star == pytest.approx(math.sqrt(1 + 0.75**2) + 0.06 * 0.5, abs=1e-8)
-    results, front = pareto_sweep(fns, bounds, [0.0, 0.02, 0.06, 0.2], EXACT)
+    asked, j_hard = [], fns.j_hard
+    fns.j_hard = lambda x, weight: (asked.append((weight, float(x[0]))), j_hard(x, weight))[1]
+    solved = []
+    results, front = pareto_sweep(fns, bounds, [0.0, 0.02, 0.06, 0.2], EXACT, extra_starts=[[9.0]],
+                                  on_solved=lambda k, w, r: solved.append((k, w, r)))
+    assert [(k, w) for k, w, _ in solved] == [(0, 0.0), (1, 0.02), (2, 0.06), (3, 0.2)]
+    assert [r for _, _, r in solved] == list(results)
+    # Warm start: each weight's sample begins with the previous weight's answer, then the extra start.
+    firsts = [[x for w, x in asked if w == weight][:2] for weight in (0.0, 0.02, 0.06, 0.2)]
+    assert firsts[0] == [9.0, firsts[0][1]] and firsts[0][1] != 9.0
+    for k in (1, 2, 3):
+        assert firsts[k] == [results[k - 1].x_star["x"], 9.0]
     costs = [r.cost for r in results]
     assert costs == sorted(costs, reverse=True) and all(front)
     assert results[0].x_star["x"] == pytest.approx(8.0, abs=1e-4) and results[-1].on_bound["x"] == "lower"

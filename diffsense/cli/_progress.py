@@ -1,4 +1,4 @@
-"""Progress a person can follow: stage lines, evaluations with the current E and an ETA.
+"""Progress a person can follow: stage lines, evaluations with the current E (and cost) and an ETA.
 
 On a terminal the evaluations are one progress bar (tqdm); otherwise one plain line each, so a
 log shows them too; nothing under --quiet but the estimate. Once the first evaluations have been timed, a run
@@ -50,7 +50,10 @@ class Progress:
                   f"{statistics.median(self._times):.1f} s = about {eta / 60:.1f} min", file=self.stream, flush=True)
         if self.quiet:
             return
-        text = f"E {event['kind']} = {event['E_m']:.4f} m" + (f", ETA {eta:.0f} s" if eta is not None else "")
+        text = f"E {event['kind']} = {event['E_m']:.4f} m"
+        if event.get("cost") is not None:  # a cost-aware (box) solve also says what the point costs
+            text += f", cost {event['cost']:.2f}"
+        text += f", ETA {eta:.0f} s" if eta is not None else ""
         if self.stream.isatty():
             if self._bar is None:
                 from tqdm import tqdm

@@ -5,7 +5,8 @@
 A thin face over `diffsense.optimise`: the flags and `--config` become a `diffsense.Problem`
 (defaults: configs/optimise/default.toml; a config file may be partial), the library solves it,
 and result.json, objective.png, rmse_horizon.png and detections.png are written to --out
-(with `--sensor both`, one folder per sensor and comparison.txt).
+(with `--sensor both`, one folder per sensor and comparison.txt; with --pareto, pareto.json and
+pareto.png). --suite FILE reads the sensors, parameters and cost weight from a suite file.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from pathlib import Path
 
 from diffsense import cli as _cli
 from diffsense.cli._progress import Progress
+from diffsense.cli._suite import pareto_lambdas, pareto_run, suite_fields
 from diffsense.errors import InputError
 
 
@@ -38,6 +40,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--param", action="append", metavar="NAME[=LO:HI]",
                    help="differentiable parameter, e.g. hfov, range, tx_power, width (with --interval); or, "
                    "repeated, NAME=LO:HI for several at once (a suite's are qualified: radar.hfov_deg=20:120)")
+    p.add_argument("--suite", metavar="FILE", help="a suite file (configs/suites/*.toml): the sensors, their free "
+                   "parameters with bounds and the cost weight, instead of --sensor and --param")
+    p.add_argument("--pareto", nargs="?", const="", metavar="LAMBDAS",
+                   help="trace the E-versus-cost front instead of one solve: a box solve per cost weight, each "
+                   "warm-started from the last (comma-separated, m per currency unit; default "
+                   "0,0.001,0.002,0.005,0.01,0.02,0.05); writes pareto.json and pareto.png")
     p.add_argument("--cost-weight", type=float, metavar="LAMBDA",
                    help="optimise E + LAMBDA * cost (configs/costs.toml) [m per currency unit]")
     p.add_argument("--interval", nargs=2, type=float, metavar=("LO", "HI"), help="interval of r (parameter units)")
@@ -113,19 +121,21 @@ def problems(args: argparse.Namespace) -> list:
     """The `diffsense.Problem` of each sensor the flags ask for, every input checked."""
     from diffsense import Problem
     from diffsense._problem import load_settings, problem_fields
+    from diffsense._suite_file import checked
     from diffsense.config import to_dict
     from diffsense.metrics import EstimatorConfig
     from diffsense.solve import check_steps
 
     settings = load_settings(args.config)
-    text = args.sensor or settings.problem.sensor
+    suite = suite_fields(args)
+    text = ",".join(suite["sensor"]) if suite else args.sensor or settings.problem.sensor
     if text == "both":
         sensors = ["radar", "camera"]
     elif "," in text:
         sensors = [tuple(s.strip() for s in text.split(",") if s.strip())]
     else:
         sensors = [text]
-    boxes = _param_boxes(args.param)
+    boxes = suite["params"] if suite else _param_boxes(args.param)
     if boxes and args.interval:
         raise InputError("--param NAME=LO:HI carries its bounds: give no --interval with it")
     single = None if boxes or not args.param else args.param[0]
@@ -138,6 +148,8 @@ def problems(args: argparse.Namespace) -> list:
                 raise InputError("a suite needs its parameters as --param NAME=LO:HI (e.g. radar.hfov_deg=20:120)")
         else:
             fields = problem_fields(settings, sensor, single, tuple(args.interval) if args.interval else None)
+        if suite:
+            fields["cost_weight"] = suite["cost_weight"]
         if args.cost_weight is not None:
             fields["cost_weight"] = args.cost_weight
         if args.scenarios is not None:
@@ -169,7 +181,7 @@ def problems(args: argparse.Namespace) -> list:
                    if v is not None}
         if weather:
             fields["weather"] = weather
-        problem = Problem(**fields)
+        problem = checked(args.suite, lambda: Problem(**fields)) if suite else Problem(**fields)
         if problem.steps is not None:
             (lo, hi), = problem.params.values()
             check_steps(problem.steps, lo, hi)
@@ -222,6 +234,7 @@ def _check_memory(todo: list, max_memory_gb: float | None) -> None:
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     todo = problems(args)
+    lambdas = pareto_lambdas(args, todo)
     _check_inputs(todo)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -244,6 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     model = todo[0].predictor
     predictor = load_predictor(model or None)  # a bad checkpoint fails before any output
     progress("loaded the predictor" + (f" {model}" if model else " (shipped weights)"))
+    if lambdas is not None:
+        return pareto_run(todo[0], lambdas, out, predictor, progress)
     results = {}
     # Every file of the run is written to a staging folder and published into --out as one set:
     # an interrupted or failed run leaves the previous run's files as they were.

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -290,11 +290,21 @@ def _named(names: Sequence[str], x) -> dict[str, float]:
     return {n: float(v) for n, v in zip(names, np.asarray(x, np.float64))}
 
 
-def pareto_sweep(fns: BoxFunctions, bounds: Any, weights: Sequence[float], config: BoxConfig = BoxConfig()
+def pareto_sweep(fns: BoxFunctions, bounds: Any, weights: Sequence[float], config: BoxConfig = BoxConfig(),
+                 extra_starts: Sequence[Sequence[float]] = (),
+                 on_solved: Callable[[int, float, BoxResult], None] | None = None,
                  ) -> tuple[tuple[BoxResult, ...], tuple[bool, ...]]:
-    """One box solve per cost weight (the evaluations are memoised in `fns`, so the coarse
-    sample is paid once), and which answers are Pareto-optimal in (E_hard, cost)."""
-    results = tuple(box_solve(fns, bounds, dataclasses.replace(config, cost_weight=float(w))) for w in weights)
+    """One box solve per cost weight, in the order given, and which answers are Pareto-optimal in
+    (E_hard, cost). Each solve after the first is warm-started: the previous weight's answer joins
+    its sample (and `extra_starts`); the evaluations are memoised in `fns`, so the coarse sample is
+    paid for once. `on_solved(k, weight, result)` is called after each solve."""
+    results: list[BoxResult] = []
+    for k, w in enumerate(weights):
+        warm = [[results[-1].x_star[n] for n in fns.names]] if results else []
+        results.append(box_solve(fns, bounds, dataclasses.replace(config, cost_weight=float(w)),
+                                 extra_starts=[*warm, *extra_starts]))
+        if on_solved is not None:
+            on_solved(k, float(w), results[-1])
     pts = [(r.E_hard, r.cost) for r in results]
     front = tuple(not any(q[0] <= p[0] and q[1] <= p[1] and q != p for q in pts) for p in pts)
-    return results, front
+    return tuple(results), front

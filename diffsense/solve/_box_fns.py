@@ -9,7 +9,8 @@ that order):
 
 and forms the solver's objective J = E + cost_weight * cost, soft or hard. Every distinct soft
 and hard evaluation is counted once (a repeated point costs nothing) and recorded in order in
-`history`, so a benchmark can draw the best value against the evaluations spent. Build it from
+`history`, so a benchmark can draw the best value against the evaluations spent; `listener`, if
+set, is called with each new `Event` (a progress display). Build it from
 a `diffsense.solve.Evaluator` (`from_evaluator`), from jax functions (`from_jax`), or directly.
 """
 
@@ -47,6 +48,7 @@ class BoxFunctions:
         self._e2_soft, self._e_hard, self._cost = e2_soft, e_hard, cost
         self.counts = {"soft": 0, "hard": 0}
         self.history: list[Event] = []
+        self.listener: Callable[[Event], None] | None = None
         self._soft: dict[tuple, tuple[float, np.ndarray]] = {}
         self._hard: dict[tuple, float] = {}
         self._costs: dict[tuple, tuple[float, np.ndarray]] = {}
@@ -88,7 +90,7 @@ class BoxFunctions:
             v, g = self._e2_soft(np.asarray(key[0]), key[1])
             self._soft[key] = (float(v), np.asarray(g, np.float64).reshape(len(self.names)))
             self.counts["soft"] += 1
-            self.history.append(Event("soft", key[0], key[1], math.sqrt(max(float(v), 0.0))))
+            self._record(Event("soft", key[0], key[1], math.sqrt(max(float(v), 0.0))))
         return self._soft[key]
 
     def e_hard(self, x) -> float:
@@ -97,8 +99,13 @@ class BoxFunctions:
         if key not in self._hard:
             self._hard[key] = float(self._e_hard(np.asarray(key)))
             self.counts["hard"] += 1
-            self.history.append(Event("hard", key, None, self._hard[key]))
+            self._record(Event("hard", key, None, self._hard[key]))
         return self._hard[key]
+
+    def _record(self, event: Event) -> None:
+        self.history.append(event)
+        if self.listener is not None:
+            self.listener(event)
 
     def cost(self, x) -> tuple[float, np.ndarray]:
         """cost [currency] and its gradient (0 without a cost function)."""

@@ -1,0 +1,88 @@
+"""Suite files: a sensor suite's design problem in one strict TOML (`configs/suites/*.toml`).
+
+    sensors = ["radar", "camera"]          # the suite's members, fused into one track per vehicle
+    cost_weight = 0.002                     # lambda in E + lambda * cost [m per currency unit]; optional
+    description = "..."                     # optional
+    [params]                                # the free parameters, qualified by the member, and bounds
+    "radar.hfov_deg" = [20.0, 120.0]
+    "camera.width_px" = [640.0, 3840.0]
+
+`ds.Problem.from_suite(path)` and `python -m diffsense.optimise --suite FILE` read it. Nothing else
+is accepted: an unknown key or a value of the wrong type is refused in one line naming the file,
+and so is what `Problem` refuses (a bound outside its domain, reversed bounds, a parameter named
+twice, a sensor not in the suite).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+from diffsense.errors import InputError
+
+_KEYS = ("sensors", "cost_weight", "description", "params")
+T = TypeVar("T")
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _fail(path: Path, message: str) -> InputError:
+    return InputError(f"suite {path}: {message}")
+
+
+def _read(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise InputError(f"suite {path}: not a file")
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise _fail(path, f"not valid TOML ({e})") from None
+
+
+def _params(path: Path, table: Any) -> dict[str, tuple[float, float]]:
+    if not isinstance(table, dict) or not table:
+        raise _fail(path, "[params] must be a table naming at least one parameter, e.g. \"radar.hfov_deg\" = [20, 120]")
+    out = {}
+    for name, bounds in table.items():
+        if isinstance(bounds, dict):  # an unquoted dotted key (radar.hfov_deg = ...) makes a sub-table
+            raise _fail(path, f"quote the qualified name: \"{name}.{next(iter(bounds), '')}\" = [LO, HI]")
+        if not (isinstance(bounds, list) and len(bounds) == 2 and all(_number(b) for b in bounds)):
+            raise _fail(path, f"params {name} must be two numbers [LO, HI], got {bounds!r}")
+        out[name] = (float(bounds[0]), float(bounds[1]))
+    return out
+
+
+def load_suite(path: str | Path) -> dict[str, Any]:
+    """The `Problem` fields a suite file gives: {"sensor", "params", "cost_weight"}, each value's
+    type checked (the values themselves are checked by `Problem`)."""
+    path = Path(path)
+    data = _read(path)
+    unknown = [k for k in data if k not in _KEYS]
+    if unknown:
+        raise _fail(path, f"unknown key {unknown[0]!r} (known: {', '.join(_KEYS)})")
+    sensors = data.get("sensors")
+    if not (isinstance(sensors, list) and sensors and all(isinstance(s, str) and s for s in sensors)):
+        raise _fail(path, f"sensors must be a list of sensor names, e.g. [\"radar\", \"camera\"], got {sensors!r}")
+    if "params" not in data:
+        raise _fail(path, "no [params]: name the free parameters and their bounds")
+    cost_weight = data.get("cost_weight", 0.0)
+    if not _number(cost_weight) or not math.isfinite(cost_weight):
+        raise _fail(path, f"cost_weight must be a finite number, got {cost_weight!r}")
+    if not isinstance(data.get("description", ""), str):
+        raise _fail(path, f"description must be a string, got {data['description']!r}")
+    return {"sensor": list(sensors), "params": _params(path, data["params"]), "cost_weight": float(cost_weight)}
+
+
+def checked(path: str | Path, build: Callable[[], T]) -> T:
+    """`build()`, its one-line refusal prefixed with the suite file's name."""
+    try:
+        return build()
+    except InputError as e:
+        if str(e).startswith(f"suite {Path(path)}"):
+            raise
+        raise _fail(Path(path), str(e)) from None

@@ -1,0 +1,165 @@
+"""The many-parameter main job: one box solve of J = E + lambda * cost (`optimise_box`), and the
+E-versus-cost front by a warm-started sweep of lambda (`pareto`).
+
+    front = ds.pareto(ds.Problem.from_suite("configs/suites/radar_camera_d4.toml"))
+    front.front()            # the non-dominated designs, cheapest first
+
+Each lambda's box solve starts from the coarse sample and from the previous lambda's answer
+(warm start); evaluations are memoised across the sweep, so the sample is paid for once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from diffsense._breakdown import breakdown
+from diffsense._domain import domain_check, domain_note
+from diffsense._problem import Problem
+from diffsense._result import Result
+from diffsense._timing import CompileClock
+from diffsense.errors import InputError
+from diffsense.metrics import Objective
+from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, pareto_sweep
+
+# The cost weights a front is traced at by default [m per currency unit]: from E alone (0) to
+# 0.05 m per EUR, where the shipped sensors' price range (their defaults cost 132 EUR together)
+# outweighs metres of E; roughly doubling, so that the front's knee is bracketed.
+DEFAULT_LAMBDAS: tuple[float, ...] = (0.0, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05)
+
+Say = Callable[[str], None]
+OnEvaluation = Callable[[dict], None] | None
+
+
+def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, planned: int):
+    """The Evaluator, the box functions (cost model included) and the clipped default start."""
+    from diffsense.metrics._cost import load_costs, make_cost
+
+    ev = Evaluator(E)
+    fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.costs), E.sensor))
+    if on_evaluation is not None:
+        def listen(event) -> None:  # what a progress display shows: E, the cost there, the count
+            done = sum(fns.counts.values())
+            on_evaluation({"kind": event.kind, "E_m": event.value, "tau": event.tau, "cost": fns.cost(event.x)[0],
+                           "done": done, "planned": max(planned, done)})
+
+        fns.listener = listen
+    defaults = E.sensor.defaults()
+    start = [min(max(defaults[n], lo), hi) for n, (lo, hi) in problem.params.items()]
+    return ev, fns, start
+
+
+def _planned(problem: Problem, solves: int = 1) -> int:
+    return solves * problem.box.max_soft + (problem.box.samples or 2 * len(problem.params) + 2)
+
+
+def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say, on_evaluation: OnEvaluation) -> Result:
+    """Many parameters (or a cost): the box solve (`diffsense.solve.box_solve`): a coarse hard
+    sample, BFGS with temperature continuation from its best points, every answer checked on the
+    hard objective J = E_hard + cost_weight * cost."""
+    from diffsense._optimise import _config, objective
+
+    with CompileClock() as clock:
+        say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
+        E = objective(problem, predictor=predictor) if E is None else E
+        ev, fns, start = _functions(problem, E, on_evaluation, _planned(problem))
+        domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
+        say(f"{problem.sensor_kind}: box solve of {', '.join(problem.params)}")
+        box = box_solve(fns, problem.params, dataclasses.replace(problem.box, cost_weight=problem.cost_weight,
+                                                                  seed=problem.seed), extra_starts=[start])
+        x = [box.x_star[n] for n in E.names]
+        parts = {"breakdown": breakdown(ev.hard(x), np.asarray(E.data.scenario), np.asarray(E.data.weight),
+                                        E.scenario_names, E.spec.horizon_s())}
+    notes = tuple(f"{n} is on its {side} bound" for n, side in box.on_bound.items() if side)
+    if domain_note(domain):
+        notes += (domain_note(domain),)
+    return Result(
+        sensor=problem.sensor_kind, params=dict(problem.params), units={n: s.unit for n, s in problem.specs().items()},
+        r_star=dict(box.x_star), E_hard_star=float(box.E_hard), E_soft_star=float(box.E_soft), solve=None, box=box,
+        programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
+        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
+        scenarios=tuple(E.scenario_names), config=_config(problem), domain=domain, box_notes=notes, **parts)
+
+
+@dataclasses.dataclass(frozen=True)
+class ParetoFront:
+    """The E-versus-cost designs of a suite problem, one per cost weight lambda.
+
+    Attributes:
+        sensor: the suite's name ("radar+camera").
+        units: each parameter's unit.
+        currency: the cost model's currency.
+        lambdas: the cost weights, in sweep order [m per currency unit].
+        designs: each lambda's box solve (r*, E_hard, cost, dJ/dr and bounds at r*).
+        on_front: whether each design is non-dominated in (E_hard, cost) among the designs.
+        cloud: (cost, E_hard [m]) of every point the sweep evaluated on the hard objective.
+        counts: distinct soft (value and gradient) and hard evaluations of the whole sweep.
+        wall_s: the sweep's wall time [s], the objective's construction included.
+    """
+
+    sensor: str
+    units: dict[str, str]
+    currency: str
+    lambdas: tuple[float, ...]
+    designs: tuple[BoxResult, ...]
+    on_front: tuple[bool, ...]
+    cloud: tuple[tuple[float, float], ...]
+    counts: dict[str, int]
+    wall_s: float
+
+    def front(self) -> list[int]:
+        """Indices of the non-dominated designs, cheapest first."""
+        return sorted((i for i, f in enumerate(self.on_front) if f), key=lambda i: self.designs[i].cost)
+
+    def to_dict(self) -> dict[str, Any]:
+        """pareto.json's content."""
+        designs = [{"lambda": lam, "r_star": d.x_star, "E_hard_m": d.E_hard, "E_soft_m": d.E_soft, "cost": d.cost,
+                    "J": d.J_star, "on_front": f, "on_bound": d.on_bound, "gradient": d.gradient, "source": d.source,
+                    "evaluations": d.counts}
+                   for lam, d, f in zip(self.lambdas, self.designs, self.on_front)]
+        return {"sensor": self.sensor, "currency": self.currency, "units": self.units, "lambdas": list(self.lambdas),
+                "designs": designs, "front": self.front(), "evaluations": self.counts, "wall_s": self.wall_s,
+                "cloud": {"cost": [c for c, _ in self.cloud], "E_hard_m": [e for _, e in self.cloud]}}
+
+
+def check_lambdas(lambdas: Sequence[float]) -> tuple[float, ...]:
+    """The cost weights of a sweep, sorted ascending; InputError (one line) unless at least two,
+    distinct, finite and >= 0."""
+    values = tuple(float(v) for v in lambdas)
+    if len(values) < 2 or not all(np.isfinite(v) and v >= 0 for v in values):
+        raise InputError(f"a Pareto sweep needs at least two cost weights >= 0, got {list(lambdas)}")
+    if len(set(values)) != len(values):
+        raise InputError(f"cost weight {sorted(v for v in values if values.count(v) > 1)[0]:g} is given twice")
+    return tuple(sorted(values))
+
+
+def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: Objective | None = None,
+           predictor: Any = None, progress: Say | None = None, on_evaluation: OnEvaluation = None) -> ParetoFront:
+    """The E-versus-cost front of `problem`: a box solve per cost weight in `lambdas` (sorted
+    ascending; `problem.cost_weight` is not used), each warm-started from the previous answer.
+    `E`, `predictor`, `progress` and `on_evaluation` as for `diffsense.optimise`; the events also
+    carry "cost", the cost of the evaluated point."""
+    from diffsense._optimise import objective
+    from diffsense.metrics._cost import load_costs
+
+    lambdas = check_lambdas(lambdas)
+    say = progress or (lambda message: None)
+    t0 = time.perf_counter()
+    say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
+    E = objective(problem, predictor=predictor) if E is None else E
+    ev, fns, start = _functions(problem, E, on_evaluation, _planned(problem, len(lambdas)))
+    config = dataclasses.replace(problem.box, seed=problem.seed)
+
+    def solved(k: int, lam: float, result: BoxResult) -> None:
+        say(f"{problem.sensor_kind}: lambda {lam:g} ({k + 1}/{len(lambdas)}): E_hard {result.E_hard:.4f} m, "
+            f"cost {result.cost:.2f}, {result.counts['soft']} value-and-gradient + {result.counts['hard']} hard")
+
+    designs, on_front = pareto_sweep(fns, problem.params, lambdas, config, extra_starts=[start], on_solved=solved)
+    cloud = tuple((fns.cost(e.x)[0], e.value) for e in fns.history if e.kind == "hard")
+    return ParetoFront(sensor=problem.sensor_kind, units={n: s.unit for n, s in problem.specs().items()},
+                       currency=load_costs(problem.costs).currency, lambdas=lambdas, designs=designs,
+                       on_front=on_front, cloud=cloud, counts=dict(fns.counts), wall_s=time.perf_counter() - t0)

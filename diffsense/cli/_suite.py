@@ -1,0 +1,56 @@
+"""The suite flags of `python -m diffsense.optimise`: --suite FILE and --pareto [LAMBDAS]."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from diffsense.errors import InputError
+
+
+def suite_fields(args: argparse.Namespace) -> dict | None:
+    """The fields of the suite file --suite names (None without one), refusing the flags it replaces."""
+    if args.suite is None:
+        return None
+    given = [flag for flag, value in (("--sensor", args.sensor), ("--param", args.param),
+                                      ("--interval", args.interval), ("--steps", args.steps)) if value]
+    if given:
+        raise InputError(f"--suite names the sensors and parameters: give no {given[0]} with it")
+    from diffsense._suite_file import load_suite
+
+    return load_suite(args.suite)
+
+
+def pareto_lambdas(args: argparse.Namespace, problems: list) -> tuple[float, ...] | None:
+    """The cost weights of --pareto (None without it), every conflicting flag refused."""
+    if args.pareto is None:
+        return None
+    from diffsense._suite_solve import DEFAULT_LAMBDAS, check_lambdas
+
+    if len(problems) != 1:
+        raise InputError("--pareto traces one problem's front: give one sensor or a suite, not both")
+    if args.sensitivity or args.dense_check is not None:
+        raise InputError("--pareto takes no --sensitivity or --dense-check")
+    if not args.pareto:
+        return check_lambdas(DEFAULT_LAMBDAS)
+    try:
+        values = [float(v) for v in args.pareto.split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"--pareto must be comma-separated numbers, got {args.pareto!r}") from None
+    return check_lambdas(values)
+
+
+def pareto_run(problem: Any, lambdas: tuple[float, ...], out: Path, predictor: Any, progress: Any) -> int:
+    """--pareto: the front of one problem, published as one output set (pareto.json, pareto.png),
+    and its table printed."""
+    import diffsense as ds
+    from diffsense import report
+    from diffsense._io import output_set
+
+    with output_set(out) as staging:
+        front = ds.pareto(problem, lambdas, predictor=predictor, progress=progress, on_evaluation=progress.evaluation)
+        content = report.write_pareto(front, staging)
+    progress(f"wrote {out}/: " + ", ".join(report.PARETO_FILES))
+    print("\n" + report.pareto_table(content))
+    return 0
