@@ -158,3 +158,19 @@ def test_ground_truth_detects_the_present_vehicles_in_the_scene_dtype(dtype):
     det = ground_truth_detections(scene)
     assert det.p_detect.dtype == dtype
     np.testing.assert_array_equal(np.asarray(det.p_detect), [[1.0, 1.0, 0.0]] * 3)
+
+
+def test_a_miss_at_the_instant_is_never_filled_from_the_future():
+    # Missed at t itself: interp has no later detection in the window, so it holds t - 0.1 s
+    # (-2.4 m); the detection at t + 0.1 s (+2.4 m) lies in the future and must not be used.
+    hist, _ = _history({T0: 0.0}, "interp")
+    assert hist[-1, 0] == pytest.approx(-2.4, abs=1e-9)
+
+
+def test_lateral_offsets_are_positive_to_the_left():
+    # Target in lane 1; the ego one lane right (lane 0), 10 m behind; a car one lane left, 8 m ahead.
+    scene = straight_scene(s0_m=[0.0, 10.0, 18.0], lane=[0, 1, 2], speed_mps=[25.0] * 3)
+    inputs = build_inputs(scene, ground_truth_detections(scene), jax.numpy.asarray([T0]), "hold")
+    np.testing.assert_allclose(np.asarray(inputs.nbr_hist[0, :, -1]), [[-10.0, -3.66], [8.0, 3.66]], atol=1e-9)
+    future = np.asarray(true_future(scene, jax.numpy.asarray([T0]))[0])
+    np.testing.assert_allclose(future[:, 1], 0.0, atol=1e-9)
