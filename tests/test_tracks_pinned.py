@@ -174,3 +174,42 @@ def test_lateral_offsets_are_positive_to_the_left():
     np.testing.assert_allclose(np.asarray(inputs.nbr_hist[0, :, -1]), [[-10.0, -3.66], [8.0, 3.66]], atol=1e-9)
     future = np.asarray(true_future(scene, jax.numpy.asarray([T0]))[0])
     np.testing.assert_allclose(future[:, 1], 0.0, atol=1e-9)
+
+
+def test_a_measurement_error_enters_the_road_frame_rotated_by_the_road_angle():
+    # Road at 0.3 rad; the target measured (2, 1) m off in world x, y at every frame. In the road
+    # frame: lon = 2 cos 0.3 + sin 0.3 = 2.206192 m, lat = -2 sin 0.3 + cos 0.3 = 0.364297 m.
+    scene = straight_scene(s0_m=[0.0, 20.0], lane=[1, 1], speed_mps=[25.0, 24.0])
+    scene = dataclasses.replace(scene, road_angle_rad=scene.road_angle_rad + 0.3)
+    gt = ground_truth_detections(scene)
+    det = Detections(p_detect=gt.p_detect, x_m=gt.x_m.at[:, TARGET_INDEX].add(2.0), y_m=gt.y_m.at[:, TARGET_INDEX].add(1.0))
+    hist = np.asarray(build_inputs(scene, det, jax.numpy.asarray([T0]), "hold").hist[0])
+    np.testing.assert_allclose(hist[-1], [2.206192, 0.364297], atol=1e-6)
+
+
+def _grid_scene():
+    # Target (lane 1) at 50 m; others: the ego, cars 6 cells behind and ahead (-27.432, +27.432 m,
+    # the grid's first and last cells), one 7 cells ahead (outside), one two lanes left (outside).
+    return straight_scene(s0_m=[0.0, 50.0, 22.568, 77.432, 82.004, 55.0], lane=[0, 1, 1, 2, 1, 3],
+                          speed_mps=[25.0] * 6)
+
+
+def test_grid_edges_slots_and_their_type():
+    scene = _grid_scene()
+    inputs = build_inputs(scene, ground_truth_detections(scene), jax.numpy.asarray([T0]), "hold")
+    # Slot = grid lane (0 left, 1 own, 2 right) x 13 + cell (0 = 6 cells behind); ego: right, 50 m
+    # behind, outside the 13 cells.
+    assert inputs.nbr_slot.dtype == np.int32
+    np.testing.assert_array_equal(np.asarray(inputs.nbr_weight[0]), [0.0, 1.0, 1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(np.asarray(inputs.nbr_slot[0])[1:3], [13 + 0, 0 * 13 + 12])
+
+
+def test_neighbour_weight_is_seen_at_t_for_zero_and_at_least_once_for_hold():
+    scene = _grid_scene()
+    gt = ground_truth_detections(scene)
+    # The car behind (vehicle 2): missed at t, detected with p 1/2 at t - 1 and t - 2, else missed.
+    p = gt.p_detect.at[:, 2].set(0.0).at[T0 - 1, 2].set(0.5).at[T0 - 2, 2].set(0.5)
+    det = Detections(p_detect=p, x_m=gt.x_m, y_m=gt.y_m)
+    weight = {fill: float(build_inputs(scene, det, jax.numpy.asarray([T0]), fill).nbr_weight[0, 1])
+              for fill in ("zero", "hold", "interp")}
+    assert weight == pytest.approx({"zero": 0.0, "hold": 0.75, "interp": 0.75}, abs=1e-12)
