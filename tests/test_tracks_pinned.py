@@ -182,7 +182,8 @@ def test_a_measurement_error_enters_the_road_frame_rotated_by_the_road_angle():
     scene = straight_scene(s0_m=[0.0, 20.0], lane=[1, 1], speed_mps=[25.0, 24.0])
     scene = dataclasses.replace(scene, road_angle_rad=scene.road_angle_rad + 0.3)
     gt = ground_truth_detections(scene)
-    det = Detections(p_detect=gt.p_detect, x_m=gt.x_m.at[:, TARGET_INDEX].add(2.0), y_m=gt.y_m.at[:, TARGET_INDEX].add(1.0))
+    det = Detections(p_detect=gt.p_detect, x_m=gt.x_m.at[:, TARGET_INDEX].add(2.0),
+                     y_m=gt.y_m.at[:, TARGET_INDEX].add(1.0))
     hist = np.asarray(build_inputs(scene, det, jax.numpy.asarray([T0]), "hold").hist[0])
     np.testing.assert_allclose(hist[-1], [2.206192, 0.364297], atol=1e-6)
 
@@ -207,9 +208,10 @@ def test_grid_edges_slots_and_their_type():
 def test_neighbour_weight_is_seen_at_t_for_zero_and_at_least_once_for_hold():
     scene = _grid_scene()
     gt = ground_truth_detections(scene)
-    # The car behind (vehicle 2): missed at t, detected with p 1/2 at t - 1 and t - 2, else missed.
-    p = gt.p_detect.at[:, 2].set(0.0).at[T0 - 1, 2].set(0.5).at[T0 - 2, 2].set(0.5)
+    # The car behind (vehicle 2): missed at t, detected with p 1/2 at t - 1, t - 2 and t - 29 (the
+    # window's second frame), else missed: seen at least once with p 1 - 1/8.
+    p = gt.p_detect.at[:, 2].set(0.0).at[T0 - 1, 2].set(0.5).at[T0 - 2, 2].set(0.5).at[T0 - 29, 2].set(0.5)
     det = Detections(p_detect=p, x_m=gt.x_m, y_m=gt.y_m)
     weight = {fill: float(build_inputs(scene, det, jax.numpy.asarray([T0]), fill).nbr_weight[0, 1])
               for fill in ("zero", "hold", "interp")}
-    assert weight == pytest.approx({"zero": 0.0, "hold": 0.75, "interp": 0.75}, abs=1e-12)
+    assert weight == pytest.approx({"zero": 0.0, "hold": 0.875, "interp": 0.875}, abs=1e-12)
