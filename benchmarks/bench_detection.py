@@ -2,7 +2,7 @@
 
     nice -n 15 python benchmarks/bench_detection.py [--sensor radar] [--law-config PATH]
         [--scenarios sc01] [--variants 1] [--points 10,20,30,45,60,90] [--draws 32]
-        [--mc-samples 8] [--main-job] [--json PATH]
+        [--mc-samples 8] [--grid LO:HI:STEP ...] [--main-job] [--json PATH]
 
 On the objective of the default problem with the sensor's probabilistic detection law (the
 TOML at --law-config; default configs/sensors/laws/<sensor>_*.toml), at each HFOV point:
@@ -13,7 +13,8 @@ TOML at --law-config; default configs/sensors/laws/<sensor>_*.toml), at each HFO
     mean-field   the default estimator: one pass on expected histories
     mc           --mc-samples relaxed-Bernoulli samples (temperature 0.5); 0 skips it
 
-and each estimator's bias E - E_ref, also in units of E_ref's standard error. --main-job also
+and each estimator's bias E - E_ref, also in units of E_ref's standard error. --grid compares the
+mean-field estimator with E_ref on a grid: the largest relative gap and the two argmins. --main-job also
 runs `diffsense.optimise` on the default problem (every scenario, 8 variants, HFOV 30-180 deg)
 with the shipped threshold law and with the probabilistic one, and reports r*, E_hard(r*) and
 E_ref(r*): what switching the law would change in the quoted results.
@@ -75,6 +76,31 @@ def estimator_table(args) -> list[dict]:
     return rows
 
 
+def grid_agreement(args) -> list[dict]:
+    """Mean-field against E_ref on each --grid LO:HI:STEP: the largest relative gap and the
+    distance between the two argmins."""
+    import diffsense as ds
+    from diffsense.solve import Evaluator
+
+    ev = Evaluator(ds.objective(_problem(args, str(args.law_config or LAWS[args.sensor]))))
+    out = []
+    for text in args.grid:
+        lo, hi, step = (float(v) for v in text.split(":"))
+        r = np.arange(lo, hi + 0.5 * step, step)
+        ref = np.array([ev.e_reference(x) for x in r])
+        se = np.array([float(ev.reference(x).e_se) for x in r])
+        mf = np.array([np.sqrt(max(ev.e2_soft(x), 0.0)) for x in r])
+        gap = np.abs(mf - ref) / ref
+        row = {"grid": text, "points": int(r.size), "max_rel_gap": float(gap.max()), "r_max_gap": float(r[gap.argmax()]),
+               "argmin_ref": float(r[ref.argmin()]), "argmin_mean_field": float(r[mf.argmin()]),
+               "E_ref_min": float(ref.min()), "E_ref_min_se": float(se[ref.argmin()]),
+               "E_ref_at_argmin_mean_field": float(ref[mf.argmin()]),
+               "r": r.tolist(), "E_ref": ref.tolist(), "E_ref_se": se.tolist(), "E_mean_field": mf.tolist()}
+        print(json.dumps({k: v for k, v in row.items() if not isinstance(v, list)}), flush=True)
+        out.append(row)
+    return out
+
+
 def _format(row: dict) -> str:
     se = row["E_ref_se"]
     parts = [f"r {row['r']:7.2f}", f"E_ref {row['E_ref']:.4f} +- {se:.4f}"]
@@ -115,10 +141,14 @@ def main() -> None:
     p.add_argument("--points", default="10,20,30,45,60,90", help="HFOV points [deg]; '' for none")
     p.add_argument("--draws", type=int, default=32)
     p.add_argument("--mc-samples", type=int, default=8)
+    p.add_argument("--grid", action="append", default=[], metavar="LO:HI:STEP",
+                   help="also compare mean-field with E_ref on this HFOV grid [deg] (repeatable)")
     p.add_argument("--main-job", action="store_true")
     p.add_argument("--json", type=Path)
     args = p.parse_args()
     report = {"args": {k: str(v) for k, v in vars(args).items()}, "table": estimator_table(args)}
+    if args.grid:
+        report["grid"] = grid_agreement(args)
     if args.main_job:
         report["main_job"] = main_job(args)
     if args.json:
