@@ -1,4 +1,4 @@
-"""The four notebooks: the committed copies carry outputs, figures and no error; in fast mode
+"""The notebooks: the committed copies carry outputs, figures and no error; in fast mode
 (DIFFSENSE_NOTEBOOK_FAST=1: one scenario, one variant, a few points) each runs top to bottom and
 the claims its text makes that hold at any size are checked on what the run computed.
 
@@ -55,12 +55,16 @@ FACTS = {
     "vis": {f"{s} {r:g}": VIS[(s, r)] for (s, r) in VIS},
 })
 """,
+    "06": _DUMP + """dump({"rows": [vars(r) for r in ROWS], "checks": [vars(c) for c in checks(ROWS)],
+      "interval": list(CAMERA_HFOV_DEG), "grids": {"rain_mm_h": RAIN_MM_H, "fog_visibility_m": FOG_VISIBILITY_M,
+                                                  "traffic_speed_kmh": SPEED_OFFSET_KMH}})
+""",
 }
 
 
-def test_the_four_notebooks_exist():
+def test_the_notebooks_exist():
     names = [p.name[:2] for p in PATHS]
-    assert names == ["01", "02", "03", "04"], names
+    assert {"01", "02", "03", "04", "06"} <= set(names), names
 
 
 @pytest.mark.parametrize("path", PATHS, ids=[p.stem for p in PATHS])
@@ -213,3 +217,27 @@ def test_04_fast_case_study_claims(tmp_path_factory):
     # Shares of prediction instants are shares.
     for detected, unseen in f["vis"].values():
         assert 0.0 <= min(detected + unseen) and max(detected + unseen) <= 1.0
+
+
+@pytest.mark.slow
+def test_06_fast_sensitivity_claims(tmp_path_factory):
+    f = _fast_facts("06", tmp_path_factory)
+    rows = [r for r in f["rows"] if r["sensor"] == "camera"]
+    # One camera solve per asked value of each theta, every answer inside the interval.
+    for theta, values in f["grids"].items():
+        assert [r["value"] for r in rows if r["theta"] == theta] == list(values), theta
+    lo, hi = f["interval"]
+    for r in rows:
+        assert lo <= r["r_star"] <= hi and lo <= r["r_soft"] <= hi, r
+        if r["on_bound"]:  # "On a bound the derivative is 0"
+            assert r["slope"] == 0.0, r
+    # Section 1: in clear weather the camera's optimum is interior, and the theorem gives a number.
+    by_value = {(r["theta"], r["value"]): r for r in rows}
+    base = by_value[("rain_mm_h", 0.0)]
+    assert not base["on_bound"] and base["slope"] is not None and np.isfinite(base["slope"]), base
+    # The check table: the secant between two re-solved optima and the tangent's miss, as defined.
+    assert f["checks"]
+    for c in f["checks"]:
+        a, b = by_value[(c["theta"], c["lo"])], by_value[(c["theta"], c["hi"])]
+        assert c["secant"] == pytest.approx((b["r_soft"] - a["r_soft"]) / (b["value"] - a["value"]))
+        assert c["tangent_miss"] == pytest.approx(a["r_soft"] + a["slope"] * (b["value"] - a["value"]) - b["r_soft"])
