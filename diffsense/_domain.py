@@ -14,14 +14,16 @@ from typing import Any
 
 import numpy as np
 
+from diffsense._distributed import to_host
+
 DOMAIN_FACTOR = 2.0
 
 
 def domain_check(E: Any, validation_rmse_m: tuple[float, ...] | None) -> dict[str, Any]:
     """{"factor", "validation_rmse_m", "scenarios": {name: {"rmse_gt_m": [per s], "inside": bool}},
     "outside": [names]}; without validation figures every scenario is reported, none judged."""
-    gt, true = np.asarray(E.data.gt_pred, np.float64), np.asarray(E.data.true_fut, np.float64)
-    weight, scenario = np.asarray(E.data.weight, np.float64), np.asarray(E.data.scenario)
+    gt, true, weight, scenario = to_host((E.data.gt_pred, E.data.true_fut, E.data.weight, E.data.scenario))
+    gt, true, weight = (np.asarray(a, np.float64) for a in (gt, true, weight))
     per_s = int(round(E.spec.rate_hz))
     steps = [per_s * k - 1 for k in range(1, E.spec.future_points // per_s + 1)]  # 1 s, 2 s, ...
     sq = np.sum((gt - true) ** 2, axis=-1)  # [N, I, F]

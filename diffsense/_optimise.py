@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import jax
@@ -20,6 +20,7 @@ import numpy as np
 from diffsense import config as cfgio
 from diffsense._answer import near_optimal
 from diffsense._breakdown import breakdown, tracked_summary
+from diffsense._distributed import to_host
 from diffsense._domain import domain_check, domain_note
 from diffsense._problem import Problem
 from diffsense._result import Curves, Result
@@ -121,7 +122,7 @@ def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: in
 
 def _breakdowns(ev: Evaluator, E: Objective, result, miss_penalty_m2: float) -> dict[str, Any]:
     """The breakdown at r* and at every sweep step, and the tracked question's pieces at r*."""
-    scenario, weight = np.asarray(E.data.scenario), np.asarray(E.data.weight)
+    scenario, weight = to_host((E.data.scenario, E.data.weight))
 
     def at(r):
         return breakdown(ev.hard(r), scenario, weight, E.scenario_names, E.spec.horizon_s())
@@ -180,7 +181,7 @@ def memory_estimate_bytes(problem: Problem) -> int:
 
 def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = None, figures: bool = True,
              progress: Progress | None = None, on_evaluation: Callable[[dict], None] | None = None,
-             sensitivity: tuple[str, ...] = ()) -> Result:
+             sensitivity: tuple[str, ...] = (), distributed: bool | Mapping[str, Any] = False) -> Result:
     """The main job: argmin of E over the problem's box, cross-checked by the stepped sweep.
 
     One-parameter problems: the stepped sweep on E_hard, then the continuous solve inside the
@@ -190,10 +191,17 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     `E` reuses an already built `objective(problem)`; `predictor` an already loaded predictor.
     `sensitivity` names ODD parameters ("rain_mm_h", ...) whose dr*/dtheta is computed at the
     answer (`diffsense.sensitivity`) and kept in `Result.sensitivity`.
+    `distributed` (True, or {"coordinator", "num_processes", "process_id"}) joins a multi-process
+    run first (`diffsense._distributed.initialize`; before any JAX computation): every process
+    calls `optimise` with the same problem and gets the same result.
     `on_evaluation(event)` is called after every objective evaluation the run makes, with
     {"kind": "soft" | "hard", "E_m", "tau", "done", "planned"} (for progress displays).
     """
     say = progress or (lambda message: None)
+    if distributed:
+        from diffsense._distributed import initialize
+
+        initialize(**(dict(distributed) if isinstance(distributed, Mapping) else {}))
     if sensitivity:  # refused before any work, not after the solve
         from diffsense._sensitivity import check_theta
 

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from diffsense._distributed import to_host
+
 from diffsense._breakdown import breakdown
 from diffsense._domain import domain_check, domain_note
 from diffsense._problem import Problem
@@ -72,7 +74,7 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         box = box_solve(fns, problem.params, dataclasses.replace(problem.box, cost_weight=problem.cost_weight,
                                                                   seed=problem.seed), extra_starts=[start])
         x = [box.x_star[n] for n in E.names]
-        parts = {"breakdown": breakdown(ev.hard(x), np.asarray(E.data.scenario), np.asarray(E.data.weight),
+        parts = {"breakdown": breakdown(ev.hard(x), *to_host((E.data.scenario, E.data.weight)),
                                         E.scenario_names, E.spec.horizon_s())}
     notes = tuple(f"{n} is on its {side} bound" for n, side in box.on_bound.items() if side)
     if domain_note(domain):

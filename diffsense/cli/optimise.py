@@ -82,6 +82,13 @@ def _parser() -> argparse.ArgumentParser:
                    "lies in the basin of the best dense point")
     p.add_argument("--max-memory-gb", type=float, default=None,
                    help="refuse a run whose estimated memory exceeds this (default: half the machine's memory)")
+    p.add_argument("--distributed", action="store_true",
+                   help="join a multi-process run (one process per host; variants sharded over all devices); "
+                        "process 0 writes the outputs")
+    p.add_argument("--coordinator", metavar="HOST:PORT", help="process 0's address (else JAX_COORDINATOR_ADDRESS "
+                   "or the scheduler's)")
+    p.add_argument("--num-processes", type=int, metavar="N", help="processes in the run (else JAX_NUM_PROCESSES)")
+    p.add_argument("--process-id", type=int, metavar="I", help="this process's id, 0..N-1 (else JAX_PROCESS_ID)")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quiet", action="store_true", help="print only the summary table")
     return p
@@ -231,8 +238,27 @@ def _check_memory(todo: list, max_memory_gb: float | None) -> None:
                          f"{limit / 1e9:.1f} GB (fewer variants or Monte-Carlo samples, or --max-memory-gb)")
 
 
+def _join(args, out: Path) -> tuple[Path, bool]:
+    """Join the distributed run; a process other than 0 computes the same steps but writes its
+    outputs to a scratch folder and prints nothing. Returns (output folder, quiet)."""
+    import atexit
+    import shutil
+    import tempfile
+
+    from diffsense._distributed import initialize, is_writer
+
+    initialize(args.coordinator, args.num_processes, args.process_id)
+    if is_writer():
+        return out, args.quiet
+    scratch = Path(tempfile.mkdtemp(prefix="diffsense-worker-"))
+    atexit.register(shutil.rmtree, scratch, True)
+    return scratch, True
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if not args.distributed and (args.coordinator, args.num_processes, args.process_id) != (None, None, None):
+        raise InputError("--coordinator, --num-processes and --process-id need --distributed")
     todo = problems(args)
     lambdas = pareto_lambdas(args, todo)
     _check_inputs(todo)
@@ -246,6 +272,8 @@ def main(argv: list[str] | None = None) -> int:
     _check_memory(todo, args.max_memory_gb)
 
     _cli.setup_jax(float64=todo[0].float64)
+    if args.distributed:
+        out, args.quiet = _join(args, out)
     import diffsense as ds
     from diffsense import report
     from diffsense._io import write_bytes
@@ -273,6 +301,8 @@ def main(argv: list[str] | None = None) -> int:
             table = report.comparison_table(results, unit=first["units"][first["param"]])
             write_bytes(staging / "comparison.txt", (table + "\n").encode())
     progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if len(results) > 1 else ""))
+    if out != Path(args.out):  # a distributed run's worker: process 0 prints and writes
+        return 0
     for content in results.values():
         if content["param"] is None:
             print("\n" + report.box_table(content))

@@ -18,6 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffsense._distributed import to_host
+
 
 @eqx.filter_jit
 def _value_and_grad(objective, x, tau):
@@ -65,6 +67,7 @@ class Evaluator:
         if key not in self._soft:
             self.counts["soft"] += 1
             v, g = _value_and_grad(self.objective, jnp.asarray(key[0], self.dtype), jnp.asarray(key[1], self.dtype))
+            v, g = to_host((v, g))  # gathered from every process of a distributed run
             self._soft[key] = (float(v), np.asarray(g, np.float64))
             if self._progress:
                 self._progress("soft", float(np.sqrt(max(float(v), 0.0))), key[1])
@@ -76,9 +79,9 @@ class Evaluator:
         if key not in self._hard:
             self.counts["hard"] += 1
             out = _hard(self.objective, jnp.asarray(key, self.dtype))
-            self._hard[key] = jax.tree.map(np.asarray, out)
+            self._hard[key] = to_host(out)
             if self._progress:
-                self._progress("hard", float(np.sqrt(max(float(out.e2), 0.0))), 0.0)
+                self._progress("hard", float(np.sqrt(max(float(self._hard[key].e2), 0.0))), 0.0)
         return self._hard[key]
 
     def breakdown(self, x) -> dict[str, Any]:
@@ -87,7 +90,7 @@ class Evaluator:
         from diffsense._breakdown import breakdown, tracked_summary
 
         E, hard = self.objective, self.hard(x)
-        scenario, weight = np.asarray(E.data.scenario), np.asarray(E.data.weight)
+        scenario, weight = to_host((E.data.scenario, E.data.weight))
         out = breakdown(hard, scenario, weight, E.scenario_names, E.spec.horizon_s())
         return out | {"tracked": tracked_summary(hard, weight, float(E.miss_penalty_m2))}
 
@@ -97,7 +100,7 @@ class Evaluator:
         key = self._key(x)
         if key not in self._reference:
             self.reference_count += 1
-            self._reference[key] = jax.tree.map(np.asarray, _reference(self.objective, jnp.asarray(key, self.dtype)))
+            self._reference[key] = to_host(_reference(self.objective, jnp.asarray(key, self.dtype)))
         return self._reference[key]
 
     def e_reference(self, x) -> float:
