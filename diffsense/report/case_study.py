@@ -1,7 +1,9 @@
-"""The case study's tables (markdown) and the paper's three statements, from case_study.py JSON.
+"""The case study's tables (markdown) and the paper's three statements, from the JSON that
+`benchmarks/case_study.py` writes (`python -m diffsense.report.case_study FILE... [--figure-dir=DIR]`
+prints them; docs/case-study.md holds that output):
 
-    python benchmarks/case_study_report.py benchmarks/results/case_study_shipped.json \
-        benchmarks/results/case_study_ngsim.json [--figure-dir=docs/img]
+    python -m diffsense.report.case_study benchmarks/results/case_study_shipped.json \
+        benchmarks/results/case_study_ngsim.json --figure-dir=docs/img
 
 Each profile is read with its own fill (physical: hold, paper: zero, the paper's raw pipeline);
 the radar imputation table shows all three fills. Both questions: Eq. 12 pooled (E_hard) and the
@@ -17,7 +19,7 @@ import sys
 PROFILE_FILL = {"physical": "hold", "paper": "zero"}
 
 
-def _runs(data: list[dict]) -> dict:
+def index_runs(data: list[dict]) -> dict:
     return {(r["weights"], r["profile"], r["sensor"], r["fill"]): r for d in data for r in d["runs"]}
 
 
@@ -95,22 +97,23 @@ def statements(runs: dict, weights: list[str], steps: list[float]) -> str:
     return "\n".join(out)
 
 
-def figure(runs: dict, key: tuple, path: str) -> None:
+def figure(path: str, runs: dict, key: tuple) -> None:
     """The paper's Fig. 6/7 for one run: per scenario, RMSE against the true future at each
     horizon step, ground-truth input (black) and sensor input at each HFOV step."""
-    from diffsense import report
+    from diffsense.report._figures import plot_rmse_horizon
 
     run = runs[key]
     curves = {name: {"gt": run["rmse_gt"][i], "steps": {s["r"]: s["rmse_sensor"][i] for s in run["steps"]}}
               for i, name in enumerate(run["scenarios"])}
-    report.plot_rmse_horizon(path, curves, param="HFOV", unit="deg", title=" / ".join(key))
+    plot_rmse_horizon(path, curves, param="HFOV", unit="deg", title=" / ".join(key))
 
 
-def main(argv: list[str]) -> int:
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
     figures = [a.split("=", 1)[1] for a in argv if a.startswith("--figure-dir=")]
     paths = [a for a in argv if not a.startswith("--")]
     data = [json.load(open(p)) for p in paths]
-    runs = _runs(data)
+    runs = index_runs(data)
     weights = list(dict.fromkeys(w for w, *_ in runs))
     steps = data[0]["steps_deg"]
     m = data[0]["machine"]
@@ -125,9 +128,9 @@ def main(argv: list[str]) -> int:
     for folder in figures:  # Figs. 6 and 7 for the first weights, each profile with its fill
         for profile, fill in PROFILE_FILL.items():
             for sensor in ("radar", "camera"):
-                figure(runs, (weights[0], profile, sensor, fill), f"{folder}/case_{sensor}_{profile}_{weights[0]}.png")
+                figure(f"{folder}/case_{sensor}_{profile}_{weights[0]}.png", runs, (weights[0], profile, sensor, fill))
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main(sys.argv[1:]))
+    raise SystemExit(main())
