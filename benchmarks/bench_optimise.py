@@ -1,14 +1,14 @@
 """The main job's cost: cold and warm runs, the dense-grid baseline, far background traffic.
 
     python benchmarks/bench_optimise.py [--model PATH] [--variants 8] [--scenarios sc01,...]
-        [--skip-cold | --processes-only] [--repeat 1] [--repo PATH] [--dense-step 0.5] [--json PATH]
+        [--skip-cold | --processes-only] [--repeat 1] [--python EXE] [--dense-step 0.5] [--json PATH]
 
 1. The default command `python -m diffsense.optimise --param hfov --interval 30 180` in fresh
    processes: first with an empty JAX compilation cache (cold), then --repeat times with the
    cache the cold run filled (warm). Target: cold under 90 s on the 2-core reference machine.
-   `--repo PATH` runs the command from another checkout of the project (its `diffsense` comes
-   first on PYTHONPATH), e.g. a `git worktree` of an older commit, to compare two versions of
-   the main job as whole processes; `--processes-only` stops after this part.
+   `--python EXE` runs the command with another environment's interpreter, e.g. a virtual
+   environment with an older commit installed (`pip install -e` of a `git worktree`), to compare
+   two versions of the main job as whole processes; `--processes-only` stops after this part.
 2. In one process, on the same objective (`diffsense.objective`): the main job's search
    (`diffsense.optimise` on the built objective, figures off: the stepped sweep and the
    continuous solve, at most 20 objective+gradient evaluations) against a dense hard grid every
@@ -36,14 +36,6 @@ from pathlib import Path
 import jax
 
 ROOT = Path(__file__).resolve().parents[1]
-# `python -m diffsense.optimise` from another checkout: an editable install maps the package
-# (and its shipped configs) to this checkout whatever sys.path says, so its import hooks are
-# dropped first and the checkout's own `diffsense` and `configs/` are used.
-_FROM_CHECKOUT = (
-    "import runpy, sys; "
-    "sys.meta_path[:] = [f for f in sys.meta_path if not str(getattr(f, '__module__', '')).startswith('__editable__')]; "
-    "runpy.run_module('diffsense.optimise', run_name='__main__', alter_sys=True)"
-)
 
 
 def _r_star(content: dict) -> float:
@@ -63,19 +55,15 @@ def _describe(repo: Path) -> str:
 
 
 def cold_and_warm(model: str | None, variants: int, scenarios: str | None, repeat: int,
-                  repo: Path | None = None) -> list[dict]:
+                  python: str = sys.executable) -> list[dict]:
     """Wall time [s] and result.json of the default command in fresh processes: one cold (empty
-    compilation cache), then `repeat` warm ones (the cache the cold run filled). `repo`: run the
-    diffsense of that checkout instead of the installed one."""
+    compilation cache), then `repeat` warm ones (the cache the cold run filled). `python`: the
+    interpreter whose installed diffsense runs (default: this one)."""
     rows = []
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
         env = dict(os.environ, XDG_CACHE_HOME=cache)
         env.pop("DIFFSENSE_NO_CACHE", None)
-        start = [sys.executable, "-m", "diffsense.optimise"]
-        if repo is not None:
-            env["PYTHONPATH"] = os.pathsep.join([str(repo)] + [p for p in [env.get("PYTHONPATH")] if p])
-            start = [sys.executable, "-c", _FROM_CHECKOUT]
-        cmd = start + ["--param", "hfov", "--interval", "30", "180",
+        cmd = [python, "-m", "diffsense.optimise", "--param", "hfov", "--interval", "30", "180",
                "--variants", str(variants), "--out", out, "--quiet"]
         if scenarios:
             cmd += ["--scenarios", scenarios]
@@ -84,7 +72,7 @@ def cold_and_warm(model: str | None, variants: int, scenarios: str | None, repea
         labels = ["cold (empty compilation cache)"] + [f"warm {i + 1} (cache of the cold run)" for i in range(repeat)]
         for label in labels:
             t0 = time.perf_counter()
-            done = subprocess.run(cmd, cwd=repo or ROOT, env=env, capture_output=True, text=True)
+            done = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
             wall = time.perf_counter() - t0
             if done.returncode != 0:
                 raise SystemExit(f"error: {' '.join(cmd)} exited {done.returncode}:\n{done.stderr[-2000:]}")
@@ -163,8 +151,8 @@ def main() -> None:
     p.add_argument("--skip-cold", action="store_true", help="skip part 1 (the fresh processes)")
     p.add_argument("--processes-only", action="store_true", help="part 1 only")
     p.add_argument("--repeat", type=int, default=1, help="warm processes after the cold one (default 1)")
-    p.add_argument("--repo", type=Path, default=None,
-                   help="checkout whose diffsense the processes of part 1 run (default: the installed one)")
+    p.add_argument("--python", default=sys.executable,
+                   help="interpreter whose installed diffsense the processes of part 1 run (default: this one)")
     p.add_argument("--dense-step", type=float, default=0.5, help="spacing of part 2's dense grid [deg]")
     p.add_argument("--json", type=Path, default=None, help="also write every measured number to this file")
     args = p.parse_args()
@@ -176,12 +164,11 @@ def main() -> None:
     measured: dict = {"variants": args.variants, "scenarios": args.scenarios}
 
     if not args.skip_cold:
-        repo = args.repo.resolve() if args.repo else None
-        import diffsense
-
-        measured["repo"] = _describe(repo) if repo else f"installed: {_describe(Path(diffsense.__file__).parents[1])}"
+        where = subprocess.run([args.python, "-c", "import importlib.util as u, pathlib; print(pathlib.Path(u.find_spec('diffsense').origin).parents[1])"],
+                               capture_output=True, text=True, check=True, timeout=300).stdout.strip()
+        measured["repo"] = f"{args.python}: {_describe(Path(where))}"
         print(f"\n1. the default command in a fresh process, diffsense from {measured['repo']}")
-        measured["processes"] = cold_and_warm(args.model, args.variants, args.scenarios, args.repeat, repo)
+        measured["processes"] = cold_and_warm(args.model, args.variants, args.scenarios, args.repeat, args.python)
         print_processes(measured["processes"])
 
     if not args.processes_only:

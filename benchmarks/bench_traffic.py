@@ -27,12 +27,11 @@ import jax
 import numpy as np
 
 from diffsense import config
-from diffsense._io import atomic_open
-from diffsense.scene._traffic_config import TrafficConfig
-from diffsense.train._dataset import (
-    _shard,
+from diffsense.scene import TrafficConfig
+from diffsense.train import (
     extract_batch,
     samples_per_simulation,
+    shard_arrays,
     simulate_batch,
     simulation_keys,
     write_dataset,
@@ -73,9 +72,8 @@ def main() -> None:
             t1 = time.perf_counter()
             dense = jax.block_until_ready(extract_batch(cfg, traj))
             t2 = time.perf_counter()
-            shard = _shard(cfg, b * batch, per_batch, dense)
-            with atomic_open(work / f"staged_{b:05d}.npz") as f:
-                np.savez(f, **shard)
+            shard = shard_arrays(cfg, b * batch, per_batch, dense)
+            np.savez(work / f"staged_{b:05d}.npz", **shard)  # scratch files: no atomic publish needed
             t3 = time.perf_counter()
             sim_s, ext_s, write_s = sim_s + t1 - t0, ext_s + t2 - t1, write_s + t3 - t2
             samples += len(shard["hist"])

@@ -105,7 +105,9 @@ def _batches(cfg: TrafficConfig, num_samples: int, key: PRNGKeyArray) -> Iterato
         yield first, keep, current
 
 
-def _shard(cfg: TrafficConfig, first: int, keep: int, dense: DenseSamples) -> dict[str, np.ndarray]:
+def shard_arrays(cfg: TrafficConfig, first: int, keep: int, dense: DenseSamples) -> dict[str, np.ndarray]:
+    """The first `keep` samples of one simulated batch (whose first simulation is number `first`)
+    as the compact arrays of one shard file."""
     dense = jax.tree_util.tree_map(lambda a: np.asarray(a)[:keep], dense)
     sim_id = first + np.arange(keep) // samples_per_simulation(cfg)
     return compact_samples(dense, sim_id)
@@ -115,7 +117,7 @@ def generate_samples(cfg: TrafficConfig, num_samples: int, key: PRNGKeyArray) ->
     """`num_samples` training samples in the shard layout (diffsense.train._samples), in memory."""
     if num_samples < 1:
         raise InputError(f"num_samples must be >= 1, got {num_samples}")
-    parts = [_shard(cfg, first, keep, dense) for first, keep, dense in _batches(cfg, num_samples, key)]
+    parts = [shard_arrays(cfg, first, keep, dense) for first, keep, dense in _batches(cfg, num_samples, key)]
     return concatenate_shards(parts)
 
 
@@ -155,7 +157,7 @@ def write_dataset(
     try:
         shards, lat, lon, neighbours = [], np.zeros(3, np.int64), np.zeros(2, np.int64), 0
         for index, (first, keep, dense) in enumerate(_batches(cfg, num_samples, jax.random.key(seed))):
-            shard = _shard(cfg, first, keep, dense)
+            shard = shard_arrays(cfg, first, keep, dense)
             name = f"shard_{index:05d}.npz"
             with atomic_open(tmp / name) as f:
                 np.savez(f, **shard)
