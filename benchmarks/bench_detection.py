@@ -2,7 +2,7 @@
 
     nice -n 15 python benchmarks/bench_detection.py [--sensor radar] [--law-config PATH]
         [--scenarios sc01] [--variants 1] [--points 10,20,30,45,60,90] [--draws 32]
-        [--mc-samples 8] [--grid LO:HI:STEP ...] [--main-job] [--json PATH]
+        [--mc-samples 8] [--grid LO:HI:STEP ...] [--solve LO:HI ...] [--main-job] [--json PATH]
 
 On the objective of the default problem with the sensor's probabilistic detection law (the
 TOML at --law-config; default configs/sensors/laws/<sensor>_*.toml), at each HFOV point:
@@ -10,11 +10,16 @@ TOML at --law-config; default configs/sensors/laws/<sensor>_*.toml), at each HFO
     E_ref        the hard objective's expectation over --draws Bernoulli draws per (frame,
                  vehicle), with its Monte-Carlo standard error (`Objective.reference`)
     E_hard       each detection decided by its probability's median (p >= 1/2)
-    mean-field   the default estimator: one pass on expected histories
+    mean-field   one pass on expected histories
+    relaxed-reference  the default estimator under a probabilistic law: E_ref's own draws, relaxed
     mc           --mc-samples relaxed-Bernoulli samples (temperature 0.5); 0 skips it
 
-and each estimator's bias E - E_ref, also in units of E_ref's standard error. --grid compares the
-mean-field estimator with E_ref on a grid: the largest relative gap and the two argmins. --main-job also
+and each estimator's bias E - E_ref, also in units of E_ref's standard error. --grid compares
+mean-field and relaxed-reference with E_ref on a grid: the largest relative gap and the argmins.
+--seeds S,... gives each estimator's bias and its spread over seeds at --points.
+--temperature-points P,... gives relaxed-reference's gap to E_ref at each of --temperatures.
+--solve LO:HI runs the default solve and scipy's bounded Brent on E_ref over an interval, each
+judged against the best point of a 1-deg grid of E_ref. --main-job also
 runs `diffsense.optimise` on the default problem (every scenario, 8 variants, HFOV 30-180 deg)
 with the shipped threshold law and with the probabilistic one, and reports r*, E_hard(r*) and
 E_ref(r*): what switching the law would change in the quoted results.
@@ -39,7 +44,7 @@ def _problem(args, law_config, **changes):
     import diffsense as ds
     from diffsense.metrics import EstimatorConfig
 
-    estimator = changes.pop("estimator", EstimatorConfig(reference_draws=args.draws))
+    estimator = changes.pop("estimator", EstimatorConfig(kind="mean-field", reference_draws=args.draws))
     fields = dict(sensor=args.sensor, scenarios=args.scenarios.split(","), variants=args.variants,
                   sensor_config=law_config, estimator=estimator)
     return ds.Problem(**(fields | changes))
@@ -55,6 +60,7 @@ def estimator_table(args) -> list[dict]:
         return []
     law = str(args.law_config or LAWS[args.sensor])
     ev = Evaluator(ds.objective(_problem(args, law)))
+    rr = Evaluator(ds.objective(_problem(args, law, estimator=EstimatorConfig(reference_draws=args.draws))))
     mc = None
     if args.mc_samples:
         mc_est = EstimatorConfig(kind="mc", samples=args.mc_samples, reference_draws=args.draws)
@@ -64,10 +70,11 @@ def estimator_table(args) -> list[dict]:
         t0 = time.perf_counter()
         ref = ev.reference(r)
         row = {"r": r, "E_ref": float(ref.e), "E_ref_se": float(ref.e_se), "E_hard": ev.e_hard(r),
-               "E_mean_field": float(np.sqrt(max(ev.e2_soft(r), 0.0)))}
+               "E_mean_field": float(np.sqrt(max(ev.e2_soft(r), 0.0))),
+               "E_relaxed_reference": float(np.sqrt(max(rr.e2_soft(r), 0.0)))}
         if mc is not None:
             row["E_mc"] = float(np.sqrt(max(mc.e2_soft(r), 0.0)))
-        for name in ("E_hard", "E_mean_field", "E_mc"):
+        for name in ("E_hard", "E_mean_field", "E_relaxed_reference", "E_mc"):
             if name in row:
                 row[f"bias_{name[2:]}"] = row[name] - row["E_ref"]
         row["wall_s"] = time.perf_counter() - t0
@@ -77,26 +84,136 @@ def estimator_table(args) -> list[dict]:
 
 
 def grid_agreement(args) -> list[dict]:
-    """Mean-field against E_ref on each --grid LO:HI:STEP: the largest relative gap and the
-    distance between the two argmins."""
+    """Each smooth estimator against E_ref on each --grid LO:HI:STEP: the largest relative gap
+    and the distance between the argmins."""
     import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
     from diffsense.solve import Evaluator
 
-    ev = Evaluator(ds.objective(_problem(args, str(args.law_config or LAWS[args.sensor]))))
+    law = str(args.law_config or LAWS[args.sensor])
+    ev = Evaluator(ds.objective(_problem(args, law)))
+    smooth = {kind: Evaluator(ds.objective(_problem(args, law, estimator=EstimatorConfig(kind=kind, reference_draws=args.draws))))
+              for kind in ("mean-field", "relaxed-reference")}
     out = []
     for text in args.grid:
         lo, hi, step = (float(v) for v in text.split(":"))
         r = np.arange(lo, hi + 0.5 * step, step)
         ref = np.array([ev.e_reference(x) for x in r])
         se = np.array([float(ev.reference(x).e_se) for x in r])
-        mf = np.array([np.sqrt(max(ev.e2_soft(x), 0.0)) for x in r])
-        gap = np.abs(mf - ref) / ref
-        row = {"grid": text, "points": int(r.size), "max_rel_gap": float(gap.max()), "r_max_gap": float(r[gap.argmax()]),
-               "argmin_ref": float(r[ref.argmin()]), "argmin_mean_field": float(r[mf.argmin()]),
+        row = {"grid": text, "points": int(r.size), "argmin_ref": float(r[ref.argmin()]),
                "E_ref_min": float(ref.min()), "E_ref_min_se": float(se[ref.argmin()]),
-               "E_ref_at_argmin_mean_field": float(ref[mf.argmin()]),
-               "r": r.tolist(), "E_ref": ref.tolist(), "E_ref_se": se.tolist(), "E_mean_field": mf.tolist()}
-        print(json.dumps({k: v for k, v in row.items() if not isinstance(v, list)}), flush=True)
+               "r": r.tolist(), "E_ref": ref.tolist(), "E_ref_se": se.tolist()}
+        for kind, sev in smooth.items():
+            e = np.array([np.sqrt(max(sev.e2_soft(x), 0.0)) for x in r])
+            gap = np.abs(e - ref) / ref
+            row[kind] = {"max_rel_gap": float(gap.max()), "r_max_gap": float(r[gap.argmax()]),
+                         "gap_in_se_at_max": float(abs(e - ref)[gap.argmax()] / se[gap.argmax()]) if se[gap.argmax()] > 0 else None,
+                         "argmin": float(r[e.argmin()]), "E_ref_at_argmin": float(ref[e.argmin()]), "E": e.tolist()}
+        print(json.dumps({k: ({kk: vv for kk, vv in v.items() if kk != "E"} if isinstance(v, dict) else v)
+                          for k, v in row.items() if not isinstance(v, list)}), flush=True)
+        out.append(row)
+    return out
+
+
+def seed_spread(args) -> list[dict]:
+    """Each estimator's bias and spread over --seeds (each seed redraws the measurement noise, the
+    reference's uniforms and mc's) at every --points HFOV: mean and standard deviation over seeds
+    of E_estimator - E_ref, and of E_ref itself."""
+    import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
+    from diffsense.solve import Evaluator
+
+    law = str(args.law_config or LAWS[args.sensor])
+    points = [float(v) for v in args.points.split(",")]
+    kinds = ("mean-field", "relaxed-reference", "mc")
+    gaps = {(r, k): [] for r in points for k in kinds}
+    refs = {r: [] for r in points}
+    for seed in [int(v) for v in args.seeds.split(",")]:
+        evs = {k: Evaluator(ds.objective(_problem(args, law, seed=seed, estimator=EstimatorConfig(
+            kind=k, samples=args.mc_samples or 8, reference_draws=args.draws)))) for k in kinds}
+        for r in points:
+            ref = evs["mean-field"].e_reference(r)
+            refs[r].append(ref)
+            for k in kinds:
+                gaps[(r, k)].append(float(np.sqrt(max(evs[k].e2_soft(r), 0.0))) - ref)
+    out = []
+    for r in points:
+        row = {"r": r, "seeds": len(refs[r]), "E_ref_mean": float(np.mean(refs[r])), "E_ref_sd": float(np.std(refs[r], ddof=1))}
+        for k in kinds:
+            g = np.asarray(gaps[(r, k)])
+            row[k] = {"bias_mean": float(g.mean()), "bias_sd": float(g.std(ddof=1))}
+        print(json.dumps(row), flush=True)
+        out.append(row)
+    return out
+
+
+def temperature_sweep(args) -> list[dict]:
+    """relaxed-reference's gap to E_ref at each --temperature-points HFOV for each temperature of
+    --temperatures [logit units]: the bias the relaxation trades for a gradient."""
+    import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
+    from diffsense.solve import Evaluator
+
+    law = str(args.law_config or LAWS[args.sensor])
+    unit = EstimatorConfig(kind="relaxed-reference", reference_draws=args.draws, reference_temperature=1.0)
+    ev = Evaluator(ds.objective(_problem(args, law, estimator=unit)))  # tau is then the temperature
+    out = []
+    for r in [float(v) for v in args.temperature_points.split(",")]:
+        ref = ev.reference(r)
+        gaps = {t: float(np.sqrt(max(ev.e2_soft(r, t), 0.0)) / float(ref.e) - 1.0)
+                for t in [float(v) for v in args.temperatures.split(",")]}
+        row = {"r": r, "E_ref": float(ref.e), "E_ref_se": float(ref.e_se), "rel_gap": gaps}
+        print(json.dumps(row), flush=True)
+        out.append(row)
+    return out
+
+
+def solve_against_brent(args) -> list[dict]:
+    """The default solve (`diffsense.optimise`, default estimator) against bounded Brent on E_ref
+    on each --solve LO:HI: E_ref at each answer with its standard error, against the best point
+    of a 1-deg grid of E_ref, and the evaluations each needed."""
+    import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
+    from diffsense.solve import Evaluator
+    from scipy.optimize import minimize_scalar
+
+    law = str(args.law_config or LAWS[args.sensor])
+    out = []
+    for text in args.solve:
+        lo, hi = (float(v) for v in text.split(":"))
+        problem = _problem(args, law, params={"hfov_deg": (lo, hi)}, estimator=EstimatorConfig(reference_draws=args.draws))
+        E = ds.objective(problem)
+        ev = Evaluator(E)
+        grid = np.arange(lo, hi + 0.5, 1.0)
+        dense = np.array([ev.e_reference(x) for x in grid])
+        best = float(dense.min())
+        t0 = time.perf_counter()
+        result = ds.optimise(problem, E=E, figures=False)
+        solve_s = time.perf_counter() - t0
+        ref = result.reference
+        r_star = next(iter(result.r_star.values()))
+        evals = result.evaluations
+        # Brent on E_ref: a fresh evaluator, every evaluation counted; the first evaluation count
+        # from which the best point so far is within 0.1 % of the grid's best.
+        brent_ev, trace = Evaluator(E), []
+
+        def f(x):
+            trace.append(brent_ev.e_reference(float(x)))
+            return trace[-1]
+
+        t0 = time.perf_counter()
+        minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": 100})
+        brent_s = time.perf_counter() - t0
+        running = np.minimum.accumulate(trace)
+        reached = np.nonzero(running <= best * 1.001)[0]
+        row = {"interval": text, "grid_best_r": float(grid[dense.argmin()]), "grid_best_E_ref": best,
+               "r_star": r_star, "E_ref_star": ref["E_ref_star"], "E_ref_star_se": ref["E_ref_star_se"],
+               "rel_to_grid_best": ref["E_ref_star"] / best - 1.0,
+               "solve_sweep_steps": len(result.sweep), "solve_objective": evals["objective"],
+               "solve_gradient": evals["gradient"], "solve_wall_s": solve_s,
+               "brent_evaluations": len(trace), "brent_E_ref": float(running[-1]),
+               "brent_evaluations_to_0.1pct": int(reached[0]) + 1 if reached.size else None, "brent_wall_s": brent_s}
+        print(json.dumps(row), flush=True)
         out.append(row)
     return out
 
@@ -104,7 +221,7 @@ def grid_agreement(args) -> list[dict]:
 def _format(row: dict) -> str:
     se = row["E_ref_se"]
     parts = [f"r {row['r']:7.2f}", f"E_ref {row['E_ref']:.4f} +- {se:.4f}"]
-    for name in ("hard", "mean_field", "mc"):
+    for name in ("hard", "mean_field", "relaxed_reference", "mc"):
         if f"bias_{name}" in row:
             bias = row[f"bias_{name}"]
             parts.append(f"{name} {row['E_' + name]:.4f} ({bias:+.4f} m, {bias / se if se > 0 else float('nan'):+.1f} SE)")
@@ -143,12 +260,24 @@ def main() -> None:
     p.add_argument("--mc-samples", type=int, default=8)
     p.add_argument("--grid", action="append", default=[], metavar="LO:HI:STEP",
                    help="also compare mean-field with E_ref on this HFOV grid [deg] (repeatable)")
+    p.add_argument("--seeds", default="", help="seeds of the spread study at --points (e.g. 0,1,2,3,4); '' for none")
+    p.add_argument("--temperature-points", default="", help="HFOV points [deg] of the temperature sweep; '' for none")
+    p.add_argument("--temperatures", default="0.1,0.03,0.01,0.001,0.0001,0.00001",
+                   help="relaxed-reference temperatures [logit units] of the temperature sweep")
+    p.add_argument("--solve", action="append", default=[], metavar="LO:HI",
+                   help="also run the default solve and bounded Brent on E_ref over this HFOV interval [deg] (repeatable)")
     p.add_argument("--main-job", action="store_true")
     p.add_argument("--json", type=Path)
     args = p.parse_args()
     report = {"args": {k: str(v) for k, v in vars(args).items()}, "table": estimator_table(args)}
     if args.grid:
         report["grid"] = grid_agreement(args)
+    if args.seeds:
+        report["seeds"] = seed_spread(args)
+    if args.temperature_points:
+        report["temperatures"] = temperature_sweep(args)
+    if args.solve:
+        report["solve"] = solve_against_brent(args)
     if args.main_job:
         report["main_job"] = main_job(args)
     if args.json:

@@ -26,7 +26,14 @@ from diffsense._problem import Problem
 from diffsense._result import Curves, Result
 from diffsense._timing import CompileClock
 from diffsense.errors import InputError
-from diffsense.metrics import Objective, SpeedShiftedScenes, make_objective, recorded_scenes, speed_shifted_scenes
+from diffsense.metrics import (
+    Objective,
+    SpeedShiftedScenes,
+    is_deterministic,
+    make_objective,
+    recorded_scenes,
+    speed_shifted_scenes,
+)
 from diffsense.predictors import load_predictor
 from diffsense.sensors import Weather
 from diffsense.sensors._mount import relevance_stand_ins
@@ -152,6 +159,13 @@ def _dense_check(ev: Evaluator, result, lo: float, hi: float, step: float) -> di
     }
 
 
+def _reference_summary(ev: Evaluator, problem: Problem, r_star: float, on_hard: bool) -> dict[str, Any]:
+    """result.json's "reference": E_ref at r* with its standard error, and what the answer was judged on."""
+    ref = ev.reference(r_star)
+    return {"answer_on": "E_hard" if on_hard else "E_ref", "estimator": problem.estimator.kind,
+            "E_ref_star": float(ref.e), "E_ref_star_se": float(ref.e_se), "draws": int(ref.draws.size)}
+
+
 def planned_evaluations(problem: Problem) -> int:
     """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check)."""
     (lo, hi), = problem.params.values()
@@ -224,6 +238,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
                 on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": sum(ev.counts.values()), "planned": planned})
 
         ev = Evaluator(E, progress=counted)
+        on_hard = hard_only or is_deterministic(E.sensor)
         domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
         if domain_note(domain):
             say("warning: " + domain_note(domain))
@@ -234,8 +249,14 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
                                      max_evaluations=problem.solve.max_evaluations)
         else:
             e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
-            result = solve(e2_soft, e_hard, (lo, hi), steps=problem.steps, config=problem.solve,
+            # Under a probabilistic detection law the sweep, the answer and the polish are judged
+            # on E_ref, the expectation the estimator approximates; under the threshold law E_ref
+            # is E_hard.
+            e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
+            result = solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
                            value_and_grad=ev.host_value_and_grad)
+        if not on_hard:  # the solver's notes name its answer objective E_hard; here it is E_ref
+            result = dataclasses.replace(result, notes=tuple(n.replace("E_hard", "E_ref") for n in result.notes))
         solve_counts = dict(ev.counts)
         say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, E_hard(r*) = {result.E_hard_star:.4f} m")
         curves = _curves(ev, E, result, lo, hi, problem.extra_curve_points, hard_only) if figures else None
@@ -248,16 +269,19 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + dense["verdict"]))
     if domain_note(domain):
         result = dataclasses.replace(result, notes=(*result.notes, domain_note(domain)))
-    answer = near_optimal([(x[0], ev.e_hard(x[0])) for x in ev.hard_points()], lo, hi, result.r_star)
+    answered = [(x[0], ev.e_hard(x[0])) for x in ev.hard_points()] if on_hard else \
+        [(x[0], ev.e_reference(x[0])) for x in ev.reference_points()]
+    answer = near_optimal(answered, lo, hi, result.r_star)
     out = Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
-        r_star={name: float(result.r_star)}, E_hard_star=float(result.E_hard_star),
+        r_star={name: float(result.r_star)}, E_hard_star=ev.e_hard(result.r_star),
         E_soft_star=float(result.E_soft_star), solve=result,
         programs_run={"solve": solve_counts, "figures": figure_counts},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
         scenarios=tuple(E.scenario_names),
         config=_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
-        flags=tuple(answer["flags"]), domain=domain, **parts)
+        flags=tuple(answer["flags"]), domain=domain, reference=_reference_summary(ev, problem, result.r_star, on_hard),
+        **parts)
     if sensitivity:
         from diffsense._sensitivity import sensitivity as implicit
 

@@ -49,8 +49,9 @@ class Problem:
         sensor_config: a TOML of sensor constants (any subset) replacing the profile's.
         fill: missing-detection policy: "zero", "hold" or "interp" (None: the profile's, "hold"
             for physical, the paper's "zero" for paper).
-        estimator: how detection uncertainty enters ("mean-field", "mc", "hard", or an
-            `EstimatorConfig` with its knobs).
+        estimator: how detection uncertainty enters ("auto", "mean-field", "mc",
+            "relaxed-reference", "hard", or an `EstimatorConfig` with its knobs; see
+            `diffsense.metrics.EstimatorConfig`).
         prediction_stride_frames: one prediction instant every this many scene frames [-].
         background_vehicles: if > 0, replaces every scenario's count of far background vehicles.
         float64: compute E(r) in float64 (enables JAX's x64 mode when needed).
@@ -82,7 +83,7 @@ class Problem:
     profile: str = "physical"
     sensor_config: str | None = None
     fill: str | None = None
-    estimator: str | EstimatorConfig = "mean-field"
+    estimator: str | EstimatorConfig = "auto"
     prediction_stride_frames: int = 4
     background_vehicles: int = 0
     float64: bool = True

@@ -9,7 +9,15 @@ result.json schema (every key always present; non-finite numbers are written as 
     "interval"      [lo, hi] its bounds (null otherwise)
     "r_star"        {name: number}       the answer
     "E_soft_star"   number   E at r* with the estimator at the final temperature [m]
-    "E_hard_star"   number   E at r* with hard detections [m]; <= every sweep step's E_hard
+    "E_hard_star"   number   E at r* with hard detections [m] (each detection its probability's
+                             median); under the threshold law <= every sweep step's E_hard
+    "reference"     {"answer_on": "E_hard" | "E_ref", "estimator", "E_ref_star": m, "E_ref_star_se": m,
+                             "draws": K}  E_ref at r* (the hard objective's expectation over K
+                             detection draws) and its standard error. Under a probabilistic
+                             detection law the sweep, the answer and the polish are judged on E_ref
+                             (answer_on "E_ref", and the sweep's "E_hard" entries hold E_ref);
+                             under the threshold law E_ref = E_hard (one draw, SE 0); null for
+                             many-parameter problems
     "sweep"         [{"r": number, "E_hard": m, "E_soft": m}, ...]   the stepped sweep
     "evaluations"   {"objective": int, "gradient": int}  of the continuous solve (sweep excluded)
     "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...}}  compiled-program
@@ -64,7 +72,7 @@ import diffsense
 from diffsense.solve import SolveResult
 
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
-RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "sweep",
+RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
                "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "sensitivity", "scenarios",
                "config", "versions")
@@ -155,6 +163,7 @@ class Result:
     domain: dict[str, Any] | None = None
     sensitivity: dict[str, dict[str, Any]] | None = None
     box: Any = None
+    reference: dict[str, Any] | None = None
     box_notes: tuple[str, ...] = ()
 
     @property
@@ -198,6 +207,7 @@ class Result:
             "r_star": dict(self.r_star),
             "E_soft_star": self.E_soft_star,
             "E_hard_star": self.E_hard_star,
+            "reference": self.reference,
             "sweep": [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft}
                       | ({k: b[k] for k in ("by_scenario", "coverage")} if b else {})
                       for p, b in zip(s.sweep, self.sweep_breakdown or [None] * len(s.sweep))],
@@ -232,7 +242,7 @@ class Result:
         out = {
             "sensor": self.sensor, "params": {k: list(v) for k, v in self.params.items()}, "units": dict(self.units),
             "param": None, "interval": None, "r_star": dict(self.r_star), "E_soft_star": self.E_soft_star,
-            "E_hard_star": self.E_hard_star, "sweep": [], "evaluations": self.evaluations,
+            "E_hard_star": self.E_hard_star, "reference": self.reference, "sweep": [], "evaluations": self.evaluations,
             "programs_run": self.programs_run, "wall_s": dict(self.wall_s), "on_bound": self.on_bound,
             "bracket": None, "tau_schedule": list(b.tau_schedule), "notes": list(self.box_notes),
             "objective": self.config.get("objective", "eq12"),

@@ -27,11 +27,11 @@ H = "hfov_deg"
 SWERLING = sensor.Radar(cfg.replace(sensor.load_config("radar"), detection=RadarDetection(law="swerling1")))
 
 
-def radar_objective(radar=SWERLING, key=None, draws=4, n=1):
+def radar_objective(radar=SWERLING, key=None, draws=4, n=1, kind="mean-field", **knobs):
     scenes, scenario = toy_scenes(n)
     frames = prediction_frames(scenes.num_frames)[:3]
     return make_objective(scenes, scenario, frames, radar, ToyPredictor(jnp.asarray(TOY_GAIN)), names=(H,),
-                          key=key, estimator=EstimatorConfig(reference_draws=draws), shard=False)
+                          key=key, estimator=EstimatorConfig(kind=kind, reference_draws=draws, **knobs), shard=False)
 
 
 reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))

@@ -59,7 +59,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="the sensors' shipped constants: physical (default) or paper (the paper's design)")
     p.add_argument("--sensor-config", metavar="FILE", help="TOML of sensor constants (any subset) replacing the profile's")
     p.add_argument("--fill", choices=("zero", "hold", "interp"), help="missing-detection policy (default: the profile's)")
-    p.add_argument("--estimator", choices=("mean-field", "mc", "hard"), help="how detection uncertainty enters")
+    p.add_argument("--estimator", choices=("auto", "mean-field", "mc", "relaxed-reference", "hard"),
+                   help="how detection uncertainty enters (auto: relaxed-reference under a probabilistic detection law, "
+                        "mean-field under the threshold law; docs: detection)")
     p.add_argument("--mc-samples", type=int, help="Monte-Carlo samples K (--estimator mc)")
     p.add_argument("--objective", choices=("eq12", "tracked"),
                    help="eq12: the paper's E over every instant; tracked: the error where the target has a "

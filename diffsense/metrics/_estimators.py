@@ -4,6 +4,14 @@
 - `mc`: K Monte-Carlo samples of relaxed-Bernoulli (binary Concrete) detections at temperature
   lambda, each a differentiable near-0/1 detection pattern; the objective is their mean. The
   uniform draws are fixed by a key (common random numbers), so the estimate is deterministic in r.
+- `relaxed-reference`: the reference's own K Bernoulli draws (the uniforms of E_ref,
+  `_reference.py`), each relaxed: detection sigmoid((logit p - logit u) / lambda) in place of
+  1[u < p]. As lambda -> 0 every relaxed draw becomes the reference's hard one, so the estimate
+  tends to E_ref itself at every r, its argmin to E_ref's; lambda trades that bias for a
+  gradient that sees more than the few draws on the edge of flipping. Under a deterministic
+  detection law there is nothing to draw and it is mean-field.
+- `auto` (the default): `relaxed-reference` where the sensor declares a probabilistic detection
+  law, mean-field otherwise (the threshold law, a custom sensor).
 - `hard`: the sensor's own 0/1 detections (the reference; no gradient).
 """
 
@@ -16,8 +24,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-Estimator = Literal["mean-field", "mc", "hard"]
-ESTIMATORS: tuple[str, ...] = ("mean-field", "mc", "hard")
+Estimator = Literal["auto", "mean-field", "mc", "relaxed-reference", "hard"]
+ESTIMATORS: tuple[str, ...] = ("auto", "mean-field", "mc", "relaxed-reference", "hard")
 
 # p is clipped this far from 0 and 1 before its logit is taken; below it a detection is certain
 # (or impossible) for any practical relaxation temperature.
@@ -29,17 +37,20 @@ class EstimatorConfig:
     """Estimator choice and its knobs.
 
     Attributes:
-        kind: "mean-field", "mc" or "hard".
+        kind: "auto", "mean-field", "mc", "relaxed-reference" or "hard" (module docstring).
         samples: K, Monte-Carlo samples for "mc" [-].
         relax_temperature: lambda of the relaxed Bernoulli for "mc" [-]; -> 0 gives hard samples.
+        reference_temperature: lambda of "relaxed-reference" at temperature multiplier 1, in
+            logit units [-]; the solver's continuation scales it like the gates' temperatures.
         reference_draws: K, Bernoulli draws per (frame, vehicle) of the reference objective
             E_ref (`Objective.reference`) [-]; unused by a deterministic detection law.
     """
 
-    kind: Estimator = "mean-field"
+    kind: Estimator = "auto"
     samples: int = 8
     relax_temperature: float = 0.5
     reference_draws: int = 32
+    reference_temperature: float = 0.01
 
     def __post_init__(self):
         from diffsense.errors import InputError
@@ -50,8 +61,9 @@ class EstimatorConfig:
             raise InputError(f"estimator samples must be >= 1, got {self.samples}")
         if self.reference_draws < 2:
             raise InputError(f"reference_draws must be >= 2 (a standard error needs two), got {self.reference_draws}")
-        if not self.relax_temperature > 0.0:
-            raise InputError(f"relax_temperature must be > 0, got {self.relax_temperature}")
+        for name in ("relax_temperature", "reference_temperature"):
+            if not getattr(self, name) > 0.0:
+                raise InputError(f"{name} must be > 0, got {getattr(self, name)}")
 
 
 def relaxed_bernoulli(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temperature: float) -> Float[Array, "*S"]:
@@ -66,3 +78,16 @@ def mc_uniforms(key: Array, samples: int, shape: tuple[int, ...], dtype) -> Floa
     """The fixed uniform draws of the Monte-Carlo estimator, strictly inside (0, 1)."""
     tiny = jnp.finfo(dtype).eps
     return jax.random.uniform(key, (samples, *shape), dtype=dtype, minval=tiny, maxval=1.0 - tiny)
+
+
+def relaxed_draw(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temperature: Array) -> Float[Array, "*S"]:
+    """The reference's draw 1[u < p] relaxed: sigmoid((logit p - logit u) / temperature).
+
+    Both logits are taken of values clipped into (0, 1), so a p or u of exactly 0 or 1 gives a
+    finite logit and a finite gradient; the clip changes a draw only where u or p lies within
+    `_P_CLIP` of 0 or 1.
+    """
+    p = jnp.clip(p, _P_CLIP, 1.0 - _P_CLIP)
+    u = jnp.clip(uniform, _P_CLIP, 1.0 - _P_CLIP)
+    margin = (jnp.log(p) - jnp.log1p(-p)) - (jnp.log(u) - jnp.log1p(-u))
+    return jax.nn.sigmoid(margin / temperature)

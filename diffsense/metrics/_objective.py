@@ -40,8 +40,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from diffsense.metrics._coverage import coverage_classes, p_tracked, target_window
-from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli
-from diffsense.metrics._reference import ReferenceEvaluation, is_deterministic, reference_uniforms, summarise
+from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli, relaxed_draw
+from diffsense.metrics._reference import (
+    ReferenceEvaluation,
+    declares_random_law,
+    is_deterministic,
+    reference_uniforms,
+    summarise,
+)
 from diffsense.predictors import InputSpec
 from diffsense.scene import Scene
 from diffsense.sensors import Sensor, Weather
@@ -228,20 +234,35 @@ class Objective(eqx.Module):
     def _soft_mean(self, r: Params, tau, reduce: Callable[[Array, Detections], Array]) -> Array:
         """reduce(predictions [N, I, F, 2], detections) with soft detections, averaged over the
         estimator's samples (one pass for mean-field)."""
-        det = self.detections(r, "soft", tau)
-        if self.estimator.kind != "mc":
-            return reduce(self._predict(det), det)
+        kind = self.estimator.kind
+        if (kind == "relaxed-reference" and not is_deterministic(self.sensor)) or \
+                (kind == "auto" and declares_random_law(self.sensor)):
+            # The reference's own p (exact occlusion geometry): under a probabilistic law p is
+            # already smooth in the sensor's parameters, and only the draw needs relaxing, so
+            # the estimate tends to E_ref itself as the temperature falls.
+            det = self._sensor_detections(r, "hard")
+            draws = jnp.arange(self.estimator.reference_draws)
+            temperature = self.estimator.reference_temperature * jnp.asarray(tau, self.dtype)
+
+            def relax(draw):
+                u = reference_uniforms(self.data.noise_key, draw, det.p_detect.shape[1:], self.dtype)
+                return relaxed_draw(det.p_detect, u, temperature)
+        else:
+            det = self.detections(r, "soft", tau)
+            if kind != "mc":
+                return reduce(self._predict(det), det)
+            draws = jnp.swapaxes(self.data.mc_uniform, 0, 1)
+            relax = lambda u: relaxed_bernoulli(det.p_detect, u, self.estimator.relax_temperature)
 
         # Rematerialised: reverse mode would otherwise keep every sample's predictor activations
         # (on the default problem K = 64 asked for 35 GB); each sample's forward pass is
         # recomputed in the backward pass instead, so memory does not grow with K.
         @jax.checkpoint
-        def one_sample(uniform):
-            sample = relaxed_bernoulli(det.p_detect, uniform, self.estimator.relax_temperature)
-            d = dataclasses.replace(det, p_detect=sample)
+        def one_sample(draw):
+            d = dataclasses.replace(det, p_detect=relax(draw))
             return reduce(self._predict(d), d)
 
-        return jnp.mean(jax.lax.map(one_sample, jnp.swapaxes(self.data.mc_uniform, 0, 1)), axis=0)
+        return jnp.mean(jax.lax.map(one_sample, draws), axis=0)
 
     def sq_error(self, r: Params, tau: float | Array = 1.0) -> Float[Array, "N F"]:
         """The soft E^2 split by scene variant and horizon step [m^2].

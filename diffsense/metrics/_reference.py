@@ -61,6 +61,17 @@ def is_deterministic(sensor: Any) -> bool:
     return detection is not None and detection.law == "threshold"
 
 
+def declares_random_law(sensor: Any) -> bool:
+    """True when `sensor` declares a probabilistic detection law (a radar or camera whose
+    `[detection] law` is not "threshold", or a suite with such a member). A custom sensor
+    declares none: its hard detections are taken as its own."""
+    members = getattr(sensor, "members", None)
+    if members is not None:
+        return any(declares_random_law(m) for m in members)
+    detection = getattr(getattr(sensor, "config", None), "detection", None)
+    return detection is not None and detection.law != "threshold"
+
+
 def reference_uniforms(noise_key: Array, draw: Array, shape: tuple[int, ...], dtype) -> Float[Array, "N T V"]:
     """The uniforms in [0, 1) of reference draw `draw`, one [T, V] array per variant's key."""
     def one(key):

@@ -60,15 +60,21 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
     ]
     where = "on bound" if result["on_bound"] else "interior"
     r_star = f"r* {_r(_r_star(result), scale)}"
-    rows.append([r_star, result["E_hard_star"], result["E_soft_star"], where])
+    ref = result.get("reference") or {}
+    on_ref = ref.get("answer_on") == "E_ref"
+    rows.append([r_star, ref["E_ref_star"] if on_ref else result["E_hard_star"], result["E_soft_star"], where])
     ev, wall = result["evaluations"], result["wall_s"]
     lines = [
         f"{result['sensor']}: {name} over [{_r(result['interval'][0], scale)}, "
         f"{_r(result['interval'][1], scale)}]",
-        format_table(["r", "E_hard [m]", "E_soft [m]", ""], rows),
+        format_table(["r", "E_ref [m]" if on_ref else "E_hard [m]", "E_soft [m]", ""], rows),
         f"continuous solve: {ev['objective']} objective + {ev['gradient']} gradient evaluations; "
         f"wall {wall['compile']:.1f} s compile + {wall['run']:.1f} s run",
     ]
+    if on_ref:
+        lines.append(f"E_ref(r*) = {ref['E_ref_star']:.4f} +- {ref['E_ref_star_se']:.4f} m (standard error; "
+                     f"{ref['draws']} detection draws; estimator {ref['estimator']}); "
+                     f"E_hard(r*) = {result['E_hard_star']:.4f} m with each detection at its median")
     lines += [f"note: {n}" for n in result.get("notes", [])]
     held = " (r* is on a bound, held there for small changes)" if result.get("on_bound") else ""
     for theta, d in (result.get("sensitivity") or {}).items():

@@ -101,11 +101,17 @@ class Evaluator:
         if key not in self._reference:
             self.reference_count += 1
             self._reference[key] = to_host(_reference(self.objective, jnp.asarray(key, self.dtype)))
+            if self._progress:
+                self._progress("reference", float(self._reference[key].e), 0.0)
         return self._reference[key]
 
     def e_reference(self, x) -> float:
         """E_ref [m]: the hard objective's expectation over detection draws."""
         return float(self.reference(x).e)
+
+    def reference_points(self) -> list[tuple[float, ...]]:
+        """Every point evaluated on the reference objective so far."""
+        return list(self._reference)
 
     def hard_points(self) -> list[tuple[float, ...]]:
         """Every point evaluated on the hard objective so far."""

@@ -1,0 +1,123 @@
+"""The relaxed-reference estimator: E_ref's own detection draws, each relaxed, so the smooth
+objective tends to the reference itself as its temperature falls (`diffsense.metrics._estimators`)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense import config as cfg
+from diffsense import sensors as sensor
+from diffsense.metrics._estimators import relaxed_draw
+from diffsense.sensors._laws import RadarDetection
+from tests.test_reference import SWERLING, H, radar_objective
+
+e2 = eqx.filter_jit(lambda o, r, tau: o.e2({H: r}, tau))
+reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))
+value_and_grad = eqx.filter_jit(lambda o, r, tau: jax.value_and_grad(lambda x: o.e2({H: x}, tau))(r))
+
+
+@pytest.fixture(scope="module")
+def relaxed():
+    return radar_objective(kind="relaxed-reference", draws=4)
+
+
+def test_relaxed_draw_against_the_odds_ratio():
+    # sigmoid(logit p - logit u) = p (1 - u) / (p (1 - u) + u (1 - p)): an independent form.
+    for p, u in [(0.9, 0.1), (0.3, 0.6), (0.7, 0.7), (0.02, 0.5)]:
+        odds = p * (1 - u) / (p * (1 - u) + u * (1 - p))
+        assert float(relaxed_draw(jnp.asarray(p), jnp.asarray(u), 1.0)) == pytest.approx(odds, rel=1e-12)
+    # temperature t: the same form with the odds ratio raised to 1/t
+    ratio = (0.6 / 0.4) / (0.5 / 0.5)
+    assert float(relaxed_draw(jnp.asarray(0.6), jnp.asarray(0.5), 0.25)) == pytest.approx(ratio**4 / (1 + ratio**4), rel=1e-12)
+    # the hard draw 1[u < p] in the limit, and finite values and gradients at 0 and 1
+    assert float(relaxed_draw(jnp.asarray(0.51), jnp.asarray(0.5), 1e-6)) == 1.0
+    assert float(relaxed_draw(jnp.asarray(0.49), jnp.asarray(0.5), 1e-6)) == 0.0
+    for p, u in [(0.0, 0.0), (1.0, 1.0), (0.0, 1.0), (1.0, 0.0)]:
+        g = jax.grad(lambda q: relaxed_draw(q, jnp.asarray(u), 0.01))(jnp.asarray(p))
+        assert np.isfinite(float(g))
+
+
+def test_tends_to_the_reference_as_the_temperature_falls(relaxed):
+    assert np.ptp(np.asarray(reference(relaxed, 8.0).draws)) > 0  # a beam this narrow: random draws
+    for r in (8.0, 12.0):
+        ref = reference(relaxed, r)
+        cold = float(e2(relaxed, r, 1e-7))  # temperature 1e-9 in logit units
+        np.testing.assert_allclose(cold, float(ref.e2), rtol=1e-9)
+    # warm, the relaxation shows: the gap closes as the temperature falls
+    ref = float(reference(relaxed, 8.0).e2)
+    gaps = [abs(float(e2(relaxed, 8.0, tau)) - ref) for tau in (50.0, 5.0, 1e-3)]
+    assert gaps[0] > gaps[1] > gaps[2] and gaps[0] > 1e-3 * ref
+
+
+def test_gradient_matches_float64_central_differences(relaxed):
+    for r in (9.0, 12.0):
+        value, grad = value_and_grad(relaxed, jnp.asarray(r), 1.0)
+        assert abs(float(grad)) > 1e-6
+        h = 1e-5  # the relaxed draws bend within 0.01 logit units: a small step
+        fd = (float(e2(relaxed, r + h, 1.0)) - float(e2(relaxed, r - h, 1.0))) / (2 * h)
+        np.testing.assert_allclose(float(grad), fd, rtol=1e-5)
+        np.testing.assert_allclose(float(value), float(e2(relaxed, r, 1.0)), rtol=1e-12)
+
+
+def test_auto_is_relaxed_reference_under_a_random_law_and_mean_field_otherwise(relaxed):
+    auto = radar_objective(kind="auto", draws=4)
+    assert float(e2(auto, 10.0, 1.0)) == float(e2(relaxed, 10.0, 1.0))
+    threshold = sensor.Radar.from_toml()
+    a = radar_objective(threshold, kind="auto", draws=4)
+    m = radar_objective(threshold, kind="mean-field", draws=4)
+    assert float(e2(a, 10.0, 1.0)) == float(e2(m, 10.0, 1.0))
+    # under the threshold law explicit relaxed-reference has nothing to draw: mean-field too
+    rr = radar_objective(threshold, kind="relaxed-reference", draws=4)
+    assert float(e2(rr, 10.0, 1.0)) == float(e2(m, 10.0, 1.0))
+
+
+def test_same_seed_same_value_bit_for_bit(relaxed):
+    again = radar_objective(kind="relaxed-reference", draws=4)
+    assert float(e2(again, 11.0, 1.0)) == float(e2(relaxed, 11.0, 1.0))
+    other = radar_objective(kind="relaxed-reference", draws=8, key=jax.random.PRNGKey(3))
+    assert float(e2(other, 8.0, 1.0)) != float(e2(relaxed, 8.0, 1.0))
+
+
+@pytest.mark.parametrize("pfa", [1e-12, 0.1])
+def test_no_nan_or_inf_at_the_extremes(pfa):
+    config = cfg.replace(sensor.load_config("radar"), detection=RadarDetection(law="swerling1", pfa=pfa))
+    obj = radar_objective(sensor.Radar(config), kind="relaxed-reference", draws=2)
+    vg = eqx.filter_jit(lambda o, x: jax.value_and_grad(lambda v: o.e2({H: v[0], "range_m": v[1]}))(x))
+    for hfov_deg in (0.01, 360.0):
+        for range_m in (0.1, 1000.0):
+            v, g = vg(obj, jnp.asarray([hfov_deg, range_m]))
+            assert np.isfinite(float(v)) and np.all(np.isfinite(np.asarray(g))), (pfa, hfov_deg, range_m)
+
+
+def test_swerling_fixture_is_the_swerling_law():
+    assert SWERLING.config.detection.law == "swerling1"
+
+
+def test_optimise_judges_the_answer_on_the_reference_and_reports_it():
+    import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
+    from diffsense.report import summary_table
+    from diffsense.solve import Evaluator, SolveConfig
+
+    E = radar_objective(kind="auto", draws=4)
+    problem = ds.Problem(sensor_config="configs/sensors/laws/radar_swerling1.toml", params={H: (5.0, 20.0)},
+                         steps=(5.0, 10.0, 15.0, 20.0), estimator=EstimatorConfig(reference_draws=4),
+                         solve=SolveConfig(max_evaluations=10))
+    result = ds.optimise(problem, E=E, figures=False)
+    out = result.to_json()
+    ev = Evaluator(E)
+    r_star = out["r_star"][H]
+    ref = out["reference"]
+    assert ref["answer_on"] == "E_ref" and ref["estimator"] == "auto" and ref["draws"] == 4
+    assert ref["E_ref_star"] == ev.e_reference(r_star) and ref["E_ref_star_se"] == float(ev.reference(r_star).e_se)
+    # the sweep and the answer are judged on E_ref, the answer no worse than any step
+    for step in out["sweep"]:
+        assert step["E_hard"] == ev.e_reference(step["r"])
+    assert ref["E_ref_star"] <= min(s["E_hard"] for s in out["sweep"])
+    assert out["E_hard_star"] == ev.e_hard(r_star)  # the median-threshold E, reported beside it
+    assert not any("E_hard" in n for n in out["notes"])
+    assert "E_ref(r*) = " in summary_table(out)
