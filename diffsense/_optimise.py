@@ -25,7 +25,6 @@ from diffsense._domain import domain_check, domain_note
 from diffsense._problem import Problem
 from diffsense._result import Curves, Result
 from diffsense._timing import CompileClock
-from diffsense.errors import InputError
 from diffsense.metrics import (
     Objective,
     SpeedShiftedScenes,

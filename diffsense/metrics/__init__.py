@@ -15,7 +15,8 @@ from diffsense.metrics._estimators import ESTIMATORS, Estimator, EstimatorConfig
 from diffsense.metrics._cost import cost_breakdown, load_costs, make_cost
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
 from diffsense.metrics._reference import ReferenceEvaluation, is_deterministic
-from diffsense.metrics._objective import QUESTIONS, HardEvaluation, Objective, ObjectiveData, safe_sqrt
+from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
+from diffsense.metrics._objective import QUESTIONS, Objective, safe_sqrt
 
 __all__ = [
     "COVERAGE_PARTS", "QUESTIONS", "cost_breakdown", "coverage_parts", "load_costs", "make_cost",

@@ -21,7 +21,8 @@ import numpy as np
 from diffsense.config import replace
 from diffsense.errors import InputError
 from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms
-from diffsense.metrics._objective import QUESTIONS, Objective, ObjectiveData
+from diffsense.metrics._datatypes import ObjectiveData
+from diffsense.metrics._objective import QUESTIONS, Objective
 from diffsense.metrics._sharding import shard_leading_axis
 from diffsense.predictors import InputSpec
 from diffsense.scene import Scene, ScenarioConfig, load_scenario, relevant_vehicles, simulate_scenario

@@ -37,9 +37,10 @@ from typing import Any, Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Float
 
 from diffsense.metrics._coverage import coverage_classes, p_tracked, target_window
+from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
 from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli, relaxed_draw
 from diffsense.metrics._reference import (
     ReferenceEvaluation,
@@ -49,70 +50,14 @@ from diffsense.metrics._reference import (
     summarise,
 )
 from diffsense.predictors import InputSpec
-from diffsense.scene import Scene
 from diffsense.sensors import Sensor, Weather
 from diffsense.sensors._datatypes import Detections
-from diffsense.tracks import FillPolicy, PredictorInputs, build_inputs, flatten_instants
+from diffsense.tracks import FillPolicy, build_inputs, flatten_instants
 
 Mode = Literal["soft", "hard", "reference"]
 Question = Literal["eq12", "tracked"]
 QUESTIONS: tuple[str, ...] = ("eq12", "tracked")
 Params = Mapping[str, Any]
-
-
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class ObjectiveData:
-    """Everything E(r) needs that does not depend on r; N scene variants, I instants, F steps.
-
-    Attributes:
-        scenes: [N, T, V] ground truth (padded variants repeat a real one).
-        scenario: [N] index of the scenario each variant belongs to.
-        weight: [N] 1 for real variants, 0 for padding added to shard evenly over devices.
-        gt_pred: [N, I, F, 2] predictions from ground-truth histories [m].
-        true_fut: [N, I, F, 2] the target's true future [m].
-        noise_key: [N, ...] the PRNG key of each variant's measurement noise.
-        mc_uniform: [N, K, T, V] fixed uniform draws of the Monte-Carlo estimator (K = 0 if unused).
-    """
-
-    scenes: Scene
-    scenario: Int[Array, " N"]
-    weight: Float[Array, " N"]
-    gt_pred: Float[Array, "N I F 2"]
-    true_fut: Float[Array, "N I F 2"]
-    noise_key: Array
-    mc_uniform: Float[Array, "N K T V"]
-
-
-@jax.tree_util.register_dataclass
-@dataclasses.dataclass(frozen=True)
-class HardEvaluation:
-    """E with hard (0/1) detections, and both predictions against the true future.
-
-    Attributes:
-        e2: [] E^2 [m^2] (Eq. 12, pooled).
-        sq_error: [N, F] the sensor-input against the ground-truth-input prediction, squared
-            distance per variant and horizon step, mean over instants [m^2].
-        rmse_gt: [S, F] RMSE of the ground-truth-input prediction against the true future, per
-            scenario and horizon step [m].
-        rmse_sensor: [S, F] the same for the sensor-input prediction [m].
-        sq_instant: [N, I] the squared distance per instant, mean over horizon steps [m^2].
-        coverage: [N, I, 3] 0/1: target detected at the instant, at least once in the history
-            window, throughout it (see `_coverage.py`).
-        sq_true_gt: [N, I, F] squared error of the ground-truth-input prediction against the
-            true future [m^2]; sq_true_sensor the same for the sensor-input prediction.
-        objective: [] the question's value (`e2` for "eq12"; J for "tracked") [m^2].
-    """
-
-    e2: Float[Array, ""]
-    sq_error: Float[Array, "N F"]
-    rmse_gt: Float[Array, "S F"]
-    rmse_sensor: Float[Array, "S F"]
-    sq_instant: Float[Array, "N I"]
-    coverage: Float[Array, "N I 3"]
-    sq_true_gt: Float[Array, "N I F"]
-    sq_true_sensor: Float[Array, "N I F"]
-    objective: Float[Array, ""]
 
 
 def safe_sqrt(x: Array) -> Array:
