@@ -257,7 +257,8 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         if not on_hard:  # the solver's notes name its answer objective E_hard; here it is E_ref
             result = dataclasses.replace(result, notes=tuple(n.replace("E_hard", "E_ref") for n in result.notes))
         solve_counts = dict(ev.counts)
-        say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, E_hard(r*) = {result.E_hard_star:.4f} m")
+        say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, "
+            f"{'E_hard' if on_hard else 'E_ref'}(r*) = {result.E_hard_star:.4f} m")
         curves = _curves(ev, E, result, lo, hi, problem.extra_curve_points, hard_only) if figures else None
         parts = _breakdowns(ev, E, result, problem.miss_penalty_m2)
     figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}

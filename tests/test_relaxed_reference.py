@@ -13,7 +13,7 @@ from diffsense import config as cfg
 from diffsense import sensors as sensor
 from diffsense.metrics._estimators import relaxed_draw
 from diffsense.sensors._laws import RadarDetection
-from tests.test_reference import SWERLING, H, radar_objective
+from tests.test_reference import H, radar_objective
 
 e2 = eqx.filter_jit(lambda o, r, tau: o.e2({H: r}, tau))
 reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))
@@ -91,10 +91,6 @@ def test_no_nan_or_inf_at_the_extremes(pfa):
         for range_m in (0.1, 1000.0):
             v, g = vg(obj, jnp.asarray([hfov_deg, range_m]))
             assert np.isfinite(float(v)) and np.all(np.isfinite(np.asarray(g))), (pfa, hfov_deg, range_m)
-
-
-def test_swerling_fixture_is_the_swerling_law():
-    assert SWERLING.config.detection.law == "swerling1"
 
 
 def test_optimise_judges_the_answer_on_the_reference_and_reports_it():

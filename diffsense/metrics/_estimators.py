@@ -66,12 +66,16 @@ class EstimatorConfig:
                 raise InputError(f"{name} must be > 0, got {getattr(self, name)}")
 
 
+def _clipped_logit(x: Array) -> Array:
+    """log(x / (1 - x)) of x clipped into [_P_CLIP, 1 - _P_CLIP]: finite, with a finite gradient."""
+    x = jnp.clip(x, _P_CLIP, 1.0 - _P_CLIP)
+    return jnp.log(x) - jnp.log1p(-x)
+
+
 def relaxed_bernoulli(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temperature: float) -> Float[Array, "*S"]:
     """A binary-Concrete sample with mean-parameter p from fixed uniform draws in (0, 1)."""
-    p = jnp.clip(p, _P_CLIP, 1.0 - _P_CLIP)
-    logit_p = jnp.log(p) - jnp.log1p(-p)
-    logistic_noise = jnp.log(uniform) - jnp.log1p(-uniform)
-    return jax.nn.sigmoid((logit_p + logistic_noise) / temperature)
+    logistic_noise = jnp.log(uniform) - jnp.log1p(-uniform)  # mc_uniforms keeps u inside (0, 1)
+    return jax.nn.sigmoid((_clipped_logit(p) + logistic_noise) / temperature)
 
 
 def mc_uniforms(key: Array, samples: int, shape: tuple[int, ...], dtype) -> Float[Array, "K *S"]:
@@ -87,7 +91,4 @@ def relaxed_draw(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temperature
     finite logit and a finite gradient; the clip changes a draw only where u or p lies within
     `_P_CLIP` of 0 or 1.
     """
-    p = jnp.clip(p, _P_CLIP, 1.0 - _P_CLIP)
-    u = jnp.clip(uniform, _P_CLIP, 1.0 - _P_CLIP)
-    margin = (jnp.log(p) - jnp.log1p(-p)) - (jnp.log(u) - jnp.log1p(-u))
-    return jax.nn.sigmoid(margin / temperature)
+    return jax.nn.sigmoid((_clipped_logit(p) - _clipped_logit(uniform)) / temperature)
