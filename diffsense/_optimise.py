@@ -253,9 +253,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
             # is E_hard.
             e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
             result = solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
-                           value_and_grad=ev.host_value_and_grad)
-        if not on_hard:  # the solver's notes name its answer objective E_hard; here it is E_ref
-            result = dataclasses.replace(result, notes=tuple(n.replace("E_hard", "E_ref") for n in result.notes))
+                           value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref")
         solve_counts = dict(ev.counts)
         say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, "
             f"{'E_hard' if on_hard else 'E_ref'}(r*) = {result.E_hard_star:.4f} m")

@@ -93,11 +93,34 @@ def test_no_nan_or_inf_at_the_extremes(pfa):
             assert np.isfinite(float(v)) and np.all(np.isfinite(np.asarray(g))), (pfa, hfov_deg, range_m)
 
 
-def test_optimise_judges_the_answer_on_the_reference_and_reports_it():
+def test_the_solver_notes_name_the_answer_objective_it_is_given():
+    # A bowl whose answer objective is good only in a dip at the 90-deg step (the soft optimum
+    # is overruled), and one 0.05 m better only just beside the soft optimum (the polish moves
+    # the answer): each note names the objective the solver was given.
+    from diffsense.solve import solve
+    from tests._analytic_objectives import HI, LO, dip_at
+
+    for name, other in (("E_ref", "E_hard"), ("E_hard", "E_ref")):
+        kw = {} if name == "E_hard" else {"answer_name": name}  # E_hard is the default
+        overruled = solve(*dip_at(float(np.deg2rad(90.0)), center=1.3), (LO, HI), **kw).notes
+        polished = solve(*dip_at(1.33, center=1.3, penalty=0.05), (LO, HI), **kw).notes
+        assert [n for n in overruled if "worse than the best step" in n] == [next(iter(overruled))]
+        assert f"has {name}=" in overruled[0] and overruled[0].endswith(f"candidates on {name}")
+        assert [n for n in polished if n.startswith("hard polish")] == [polished[-1]]
+        assert f"lowered {name} from" in polished[-1]
+        assert not any(other in n for n in overruled + polished)
+
+
+def test_optimise_judges_the_answer_on_the_reference_and_reports_it(monkeypatch):
     import diffsense as ds
+    from diffsense import _optimise
     from diffsense.metrics import EstimatorConfig
     from diffsense.report import summary_table
     from diffsense.solve import Evaluator, SolveConfig
+
+    names = []  # the answer objective's name optimise gives the solver
+    real_solve = _optimise.solve
+    monkeypatch.setattr(_optimise, "solve", lambda *a, **kw: names.append(kw.get("answer_name")) or real_solve(*a, **kw))
 
     E = radar_objective(kind="auto", draws=4)
     problem = ds.Problem(sensor_config="configs/sensors/laws/radar_swerling1.toml", params={H: (5.0, 20.0)},
@@ -115,5 +138,5 @@ def test_optimise_judges_the_answer_on_the_reference_and_reports_it():
         assert step["E_hard"] == ev.e_reference(step["r"])
     assert ref["E_ref_star"] <= min(s["E_hard"] for s in out["sweep"])
     assert out["E_hard_star"] == ev.e_hard(r_star)  # the median-threshold E, reported beside it
-    assert not any("E_hard" in n for n in out["notes"])
+    assert names == ["E_ref"] and not any("E_hard" in n for n in out["notes"])
     assert "E_ref(r*) = " in summary_table(out)

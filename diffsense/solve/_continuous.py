@@ -371,6 +371,7 @@ def solve(
     config: SolveConfig = SolveConfig(),
     sweep_points: Sequence[SweepPoint] | None = None,
     value_and_grad: Callable[[float, float], tuple[float, float]] | None = None,
+    answer_name: str = "E_hard",
 ) -> SolveResult:
     """Find argmin_r E over `interval`: stepped sweep, then the continuous solve (module doc).
 
@@ -385,6 +386,8 @@ def solve(
             every soft evaluation instead of tracing `e2_soft` (an objective compiled and
             memoised elsewhere, e.g. `Evaluator`); `e2_soft` is then only traced by the
             bisection method.
+        answer_name: what the notes call the objective `e_hard` evaluates (the caller knows:
+            "E_ref" when it is the expectation over detection draws).
 
     Returns:
         A SolveResult. Raises InputError on a bad interval/steps/config and FloatingPointError
@@ -444,7 +447,7 @@ def solve(
     if last is not None and last.bound != 0 and r_soft not in (lo, hi):
         notes.append(
             f"the soft minimum at tau={last.tau:g} presses on the bracket edge r={r_soft:.6g}: "
-            f"beyond it the sweep's hard objective is worse than at the best step r={best.r:.6g}"
+            f"beyond it the sweep's {answer_name} is worse than at the best step r={best.r:.6g}"
         )
     r_star, e_hard_star = r_soft, counted.hard(r_soft)
     if e_hard_star > best.E_hard:
@@ -456,9 +459,9 @@ def solve(
         candidates.append((best.E_hard, 1, best.r))
         e_hard_star, _, r_star = min(candidates)
         notes.append(
-            f"the soft optimum r={r_soft:.6g} has E_hard={candidates[0][0]:.6g} m, worse than the "
-            f"best step r={best.r:.6g} ({best.E_hard:.6g} m): soft and hard objectives disagree "
-            f"there; answer r={r_star:.6g} is the best of {len(candidates)} candidates on E_hard"
+            f"the soft optimum r={r_soft:.6g} has {answer_name}={candidates[0][0]:.6g} m, worse than the "
+            f"best step r={best.r:.6g} ({best.E_hard:.6g} m): the soft objective and {answer_name} disagree "
+            f"there; answer r={r_star:.6g} is the best of {len(candidates)} candidates on {answer_name}"
         )
     spent = counted.objective + counted.gradient
     # One evaluation stays back for E_soft at a polished r*.
@@ -467,7 +470,7 @@ def solve(
         r_polished, e_polished = _hard_polish(counted, r_star, e_hard_star, lower, upper, probes, xtol)
         if r_polished != r_star:
             notes.append(
-                f"hard polish: r={r_star:.6g} -> {r_polished:.6g} lowered E_hard from "
+                f"hard polish: r={r_star:.6g} -> {r_polished:.6g} lowered {answer_name} from "
                 f"{e_hard_star:.6g} to {e_polished:.6g} m (the soft objective cannot resolve "
                 f"differences this fine)"
             )
