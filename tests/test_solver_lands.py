@@ -232,6 +232,22 @@ def test_bisection_first_probe_brackets_a_tol_wide_interval():
     assert level.r == 0.505859375
 
 
+@pytest.mark.parametrize("center, answer", [
+    # Walking up: g(0.5078125) < 0, g(0.5234375) = 0 closes [0.5078125, 0.5234375] (2 tol);
+    # two halvings probe 0.515625 (-), 0.51953125 (-): midpoint of [0.51953125, 0.5234375].
+    (0.5234375, 0.521484375),
+    # Walking down: g(0.4921875) > 0, g(0.4765625) = 0 closes [0.4765625, 0.4921875]; halvings
+    # probe 0.484375 (+), 0.48046875 (+): midpoint of [0.4765625, 0.48046875].
+    (0.4765625, 0.478515625),
+])
+def test_bisection_walk_stops_at_a_probe_with_zero_gradient(center, answer):
+    # The second probe lands exactly on the minimum: the walk stops there (an exact zero closes
+    # the bracket from either side), then the two halvings a 2-tol-wide bracket needs.
+    level = _walk(center, max_evaluations=12)
+    assert level.gradient_evaluations == 1 + 2 + 2 and level.converged
+    assert level.r == answer and level.bound == 0
+
+
 def test_bisection_bracket_narrower_than_tol_needs_no_halving():
     # Steps 0, 1 - tol/4, 1 (best: 1 - tol/4 = 0.998046875), minimum at 0.999: the first probe is
     # clipped to 1.0, the bracket is tol / 4 wide: its midpoint 0.9990234375 is the answer.

@@ -1,0 +1,65 @@
+"""The continuous solve's edge behaviour, pinned by hand (each test kills a surviving mutant of
+docs/mutation.md's solve run)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense.solve import SolveConfig, solve
+from tests._analytic_objectives import HI, LO, bowl
+
+# Interval (0, 1), steps 0, 0.5, 1, one level with tol = 1/128 (exact in binary).
+WALK = SolveConfig(method="bisection", tau_schedule=(1.0,), xtol_rel=1 / 128, hard_polish=0,
+                   max_evaluations=12)
+
+
+def _bowl_with_nan_gradient(center: float, nan_from: float, nan_to: float):
+    """E^2 = 1 + (r - center)^2 whose dE^2/dr is NaN on the open interval (nan_from, nan_to)."""
+
+    @jax.custom_jvp
+    def e2(r, tau):
+        del tau
+        return 1.0 + (r - center) ** 2
+
+    @e2.defjvp
+    def _jvp(primals, tangents):
+        r, _ = primals
+        slope = jnp.where((r > nan_from) & (r < nan_to), jnp.nan, 2.0 * (r - center))
+        return e2(*primals), slope * tangents[0]
+
+    return e2
+
+
+def test_bisection_reports_a_gradient_not_finite_throughout_its_bracket():
+    # Minimum at 0.004: the walk down from 0.5 probes 0.5 - tol (2^k - 1), all g > 0, down to
+    # 0.0078125 and then 0.0 (clipped, g < 0): the bracket [0, 0.0078125]. Every point the
+    # halving asks for lies inside it, where g is NaN: an error, not an answer.
+    e2 = _bowl_with_nan_gradient(0.004, 0.0, 0.0078125)
+    _, e_hard = bowl(0.5)  # the hard objective makes 0.5 the best step
+    with pytest.raises(FloatingPointError, match=r"not finite in \[0.0, 0.0078125\]"):
+        solve(e2, e_hard, (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=WALK)
+
+
+def test_later_levels_probe_near_the_previous_answer():
+    # The secant on the bowl E^2 = 1 + (r - 1.3)^2 from the 60-deg step, bracket (30, 90) deg
+    # = pi/3 rad wide. The first level probes a quarter bracket (pi/12) away; the second level,
+    # warm-started at the first's answer r0 (g > 0 there: it probes downhill), 1/16 of the
+    # bracket (pi/48) away; the third, by the second level's move, at least 2 tol (tol =
+    # xtol_rel x 150 deg = 0.0026 rad): well inside the second level's step.
+    calls = []
+
+    def value_and_grad(r, tau):
+        calls.append((r, tau))
+        return 1.0 + (r - 1.3) ** 2, 2.0 * (r - 1.3)
+
+    e2, e_hard = bowl(1.3)
+    res = solve(e2, e_hard, (LO, HI), value_and_grad=value_and_grad)
+    points = {tau: [r for r, t in calls if t == tau] for tau in (4.0, 2.0)}
+    r0, r1 = res.levels[0].r, res.levels[1].r
+    assert points[4.0][:2] == pytest.approx([np.pi / 3, np.pi / 3 + np.pi / 12], abs=1e-12)
+    assert points[2.0][:2] == pytest.approx([r0, r0 - np.pi / 48], abs=1e-12)
+    third = [r for r, t in calls[len(res.sweep):] if t == 1.0]
+    assert third[0] == r1 and 2 * 0.0026 < abs(third[1] - r1) < np.pi / 48
