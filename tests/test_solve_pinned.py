@@ -63,3 +63,33 @@ def test_later_levels_probe_near_the_previous_answer():
     assert points[2.0][:2] == pytest.approx([r0, r0 - np.pi / 48], abs=1e-12)
     third = [r for r, t in calls[len(res.sweep):] if t == 1.0]
     assert third[0] == r1 and 2 * 0.0026 < abs(third[1] - r1) < np.pi / 48
+
+
+# The compass search probe by probe, on an interval (0, 1) whose steps leave one end unevaluated:
+# the soft bowl's minimum 0.5 is worse on E_hard than the best step, so the polish starts there.
+# Bracket (0, 1): first step 1/16; xtol_rel = 1/64 makes 1/64 the finest step it may take.
+@pytest.mark.parametrize("steps, hard_center, probes", [
+    # from 0.0625: 0.125 (worse), 0.0 (better, the bound: moves); from 0: 0.0625 (worse), -0.0625
+    # (outside: free); 1/32: 0.03125 (worse), 1/64: 0.015625 (worse); 1/128 is finer than 1/64.
+    ([0.0625, 1.0], 0.0, [0.125, 0.0, 0.0625, 0.03125, 0.015625]),
+    # from 0.9375: 1.0 (better, the bound: moves); from 1: 1.0625 (outside: free, the other side
+    # is still probed) 0.9375 (worse); 1/32: 0.96875 (worse); 1/64: 0.984375 (worse).
+    ([0.0, 0.9375], 1.0, [1.0, 0.9375, 0.96875, 0.984375]),
+])
+def test_hard_polish_probe_sequence_reaches_an_unevaluated_bound(steps, hard_center, probes):
+    hard_calls = []
+
+    def e_hard(r):
+        hard_calls.append(float(r))
+        return float(np.sqrt(1.0 + (float(r) - hard_center) ** 2))
+
+    def value_and_grad(r, tau):
+        return 1.0 + (r - 0.5) ** 2, 2.0 * (r - 0.5)
+
+    cfg = SolveConfig(tau_schedule=(1.0,), xtol_rel=1 / 64)
+    res = solve(bowl(0.5)[0], e_hard, (0.0, 1.0), steps=steps, config=cfg,
+                value_and_grad=value_and_grad)
+    assert res.bracket == (0.0, 1.0)
+    # after the sweep's two steps and E_hard at the soft optimum (~0.5, within tol):
+    assert abs(hard_calls[2] - 0.5) <= 1 / 64 and hard_calls[3:] == probes
+    assert res.r_star == hard_center and res.E_hard_star == 1.0 and res.on_bound
