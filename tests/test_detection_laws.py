@@ -10,6 +10,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from test_sensor_grad import POINTS, _at_extremes, _extreme_settings, extreme_scene, gradient_scene
+from test_sensor_grad import value as weighted_detections
+from test_sensor_grad import value_and_grad as weighted_detections_and_grad
 from test_sensor_scenes import make_scene
 
 from diffsense import config as cfg
@@ -203,6 +206,56 @@ def test_no_nan_or_inf_at_any_extreme(pfa):
     assert np.isfinite(np.asarray(jax.grad(lambda s: swerling1_log_pd(s, pfa))(jnp.asarray([-1e4, 0.0, 1e4])[1]))).all()
     log_pd = np.asarray(jax.vmap(jax.grad(lambda s: swerling1_log_pd(s, pfa)))(jnp.asarray([-1e4, -300.0, 300.0, 1e4])))
     assert np.isfinite(log_pd).all()
+
+
+@pytest.mark.parametrize("name, config", [("radar", RADAR), ("camera", CAMERA)], ids=["radar", "camera"])
+def test_every_parameter_matches_float64_central_differences(name, config):
+    # Every differentiable parameter (field of view, range, power, noise figure, resolution,
+    # baseline, mounting) through the law's p and the measured positions, where each matters:
+    # the camera at 116 deg puts the car at -60 deg azimuth on the image's edge, where the yaw
+    # moves its visible fraction (at 120 deg it is inside and the yaw's derivative is 0).
+    params = sensor.make_params(config, **(POINTS[name] | ({"hfov_deg": 116.0} if name == "camera" else {})))
+    scene = gradient_scene()
+    _, grad = weighted_detections_and_grad(params, scene, config, 1.0)
+    for spec in sensor.param_specs(name, config):
+        r = getattr(params, spec.name)
+        # The range cut's width is the range noise (0.4 m), not a temperature: a step of 1e-6 r
+        # keeps the central difference's h^2 term below 1e-6 of the derivative there.
+        h = 1e-6 * abs(r)
+        up = weighted_detections(sensor.with_param(params, spec.name, r + h), scene, config, 1.0)
+        down = weighted_detections(sensor.with_param(params, spec.name, r - h), scene, config, 1.0)
+        fd = float(up - down) / (2 * h)
+        assert abs(fd) > 1e-4 / abs(r), f"{spec.name}: saturated, the check would be empty"
+        assert float(getattr(grad, spec.name)) == pytest.approx(fd, rel=1e-5), spec.name
+
+
+LAW_EXTREMES = {"radar pfa 1e-12": cfg.replace(RADAR, detection=RadarDetection(law="swerling1", pfa=1e-12)),
+                "radar pfa 0.1": cfg.replace(RADAR, detection=RadarDetection(law="swerling1", pfa=0.1)),
+                "camera": CAMERA}
+
+
+# Each case compiles its own program (~10 s): the fast suite runs float64 at the smaller Pfa and
+# the camera; the larger Pfa and float32 run with the slow tests.
+@pytest.mark.parametrize("case, dtype", [
+    ("radar pfa 1e-12", np.float64), ("camera", np.float64),
+    *(pytest.param(c, d, marks=pytest.mark.slow) for c, d in [
+        ("radar pfa 0.1", np.float64), ("radar pfa 1e-12", np.float32), ("radar pfa 0.1", np.float32),
+        ("camera", np.float32)]),
+])
+def test_every_parameter_is_finite_at_both_ends_of_its_domain(case, dtype):
+    # HFOV 0.01-360 deg and range 0.1-1000 m at every temperature, and every other parameter at
+    # both ends of its domain, on a scene with a car on the FOV edge, cars co-located with the
+    # sensors, behind them, hidden behind a truck and 2 km away.
+    config = LAW_EXTREMES[case]
+    raw, temps = _extreme_settings(case.split()[0])
+    params = type(config.params)(**{k: jnp.asarray(v, dtype) for k, v in raw.items()})
+    soft, empty, hard = _at_extremes(params, jnp.asarray(temps, dtype), extreme_scene(dtype), config)
+    for leaf in jax.tree.leaves((soft, empty, hard)):
+        assert leaf.dtype == dtype and np.all(np.isfinite(np.asarray(leaf))), case
+    for p in (soft[1].p_detect, hard):
+        assert np.all((np.asarray(p) >= 0) & (np.asarray(p) <= 1))
+    np.testing.assert_array_equal(empty[1].p_detect, 1.0)  # the ego alone
+    assert np.any((np.asarray(hard) > 0) & (np.asarray(hard) < 1))  # the law's p, not a 0/1 gate
 
 
 def test_both_laws_ship_off_and_the_paper_profile_keeps_the_threshold():

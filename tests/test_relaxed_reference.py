@@ -12,7 +12,7 @@ import pytest
 from diffsense import config as cfg
 from diffsense import sensors as sensor
 from diffsense.metrics._estimators import relaxed_draw
-from diffsense.sensors._laws import RadarDetection
+from diffsense.sensors._laws import CameraDetection, RadarDetection
 from tests.test_reference import H, radar_objective
 
 e2 = eqx.filter_jit(lambda o, r, tau: o.e2({H: r}, tau))
@@ -91,6 +91,29 @@ def test_no_nan_or_inf_at_the_extremes(pfa):
         for range_m in (0.1, 1000.0):
             v, g = vg(obj, jnp.asarray([hfov_deg, range_m]))
             assert np.isfinite(float(v)) and np.all(np.isfinite(np.asarray(g))), (pfa, hfov_deg, range_m)
+
+
+CAMERA_LAW = sensor.Camera(cfg.replace(sensor.load_config("camera"), detection=CameraDetection(law="confidence")))
+
+
+def test_camera_gradients_and_extremes():
+    # The confidence camera through the whole objective with its default estimator
+    # (relaxed-reference): against float64 central differences at 20 deg (draws on the image's
+    # edge) and 40 deg, and finite at HFOV 0.01/360 deg x range 0.1/1000 m. One compiled
+    # program (HFOV and range) serves both checks.
+    camera = radar_objective(CAMERA_LAW, kind="auto", draws=4)
+    assert np.ptp(np.asarray(reference(camera, 20.0).draws)) > 0
+    vg = eqx.filter_jit(lambda o, x: jax.value_and_grad(lambda v: o.e2({H: v[0], "range_m": v[1]}))(x))
+    for r in (20.0, 40.0):
+        h = 1e-5
+        up, down = (float(vg(camera, jnp.asarray([r + s, 100.0]))[0]) for s in (h, -h))
+        grad = float(vg(camera, jnp.asarray([r, 100.0]))[1][0])
+        assert abs(grad) > 1e-3
+        np.testing.assert_allclose(grad, (up - down) / (2 * h), rtol=1e-5)
+    for hfov_deg in (0.01, 360.0):
+        for range_m in (0.1, 1000.0):
+            v, g = vg(camera, jnp.asarray([hfov_deg, range_m]))
+            assert np.isfinite(float(v)) and np.all(np.isfinite(np.asarray(g))), (hfov_deg, range_m)
 
 
 def test_the_solver_notes_name_the_answer_objective_it_is_given():
