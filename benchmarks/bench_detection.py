@@ -117,8 +117,9 @@ def grid_agreement(args) -> list[dict]:
 
 def seed_spread(args) -> list[dict]:
     """Each estimator's bias and spread over --seeds (each seed redraws the measurement noise, the
-    reference's uniforms and mc's) at every --points HFOV: mean and standard deviation over seeds
-    of E_estimator - E_ref, and of E_ref itself."""
+    reference's uniforms and mc's) at every --points HFOV: per seed E_ref ± SE and each estimator's
+    E; over seeds the mean and standard deviation of E_estimator - E_ref (paired: the same seed's
+    noise) and of E_estimator itself."""
     import diffsense as ds
     from diffsense.metrics import EstimatorConfig
     from diffsense.solve import Evaluator
@@ -126,24 +127,27 @@ def seed_spread(args) -> list[dict]:
     law = str(args.law_config or LAWS[args.sensor])
     points = [float(v) for v in args.points.split(",")]
     kinds = ("mean-field", "relaxed-reference", "mc")
-    gaps = {(r, k): [] for r in points for k in kinds}
-    refs = {r: [] for r in points}
+    per_seed = {r: [] for r in points}
     for seed in [int(v) for v in args.seeds.split(",")]:
         evs = {k: Evaluator(ds.objective(_problem(args, law, seed=seed, estimator=EstimatorConfig(
             kind=k, samples=args.mc_samples or 8, reference_draws=args.draws)))) for k in kinds}
         for r in points:
-            ref = evs["mean-field"].e_reference(r)
-            refs[r].append(ref)
-            for k in kinds:
-                gaps[(r, k)].append(float(np.sqrt(max(evs[k].e2_soft(r), 0.0))) - ref)
+            ref = evs["mean-field"].reference(r)
+            row = {"seed": seed, "E_ref": float(ref.e), "E_ref_se": float(ref.e_se)}
+            row |= {k: float(np.sqrt(max(evs[k].e2_soft(r), 0.0))) for k in kinds}
+            per_seed[r].append(row)
+            print(json.dumps({"r": r} | row), flush=True)
     out = []
-    for r in points:
-        row = {"r": r, "seeds": len(refs[r]), "E_ref_mean": float(np.mean(refs[r])), "E_ref_sd": float(np.std(refs[r], ddof=1))}
+    for r, rows in per_seed.items():
+        ref = np.array([x["E_ref"] for x in rows])
+        summary = {"r": r, "seeds": len(rows), "E_ref_mean": float(ref.mean()), "E_ref_sd": float(ref.std(ddof=1)),
+                   "E_ref_se_mean": float(np.mean([x["E_ref_se"] for x in rows]))}
         for k in kinds:
-            g = np.asarray(gaps[(r, k)])
-            row[k] = {"bias_mean": float(g.mean()), "bias_sd": float(g.std(ddof=1))}
-        print(json.dumps(row), flush=True)
-        out.append(row)
+            e = np.array([x[k] for x in rows])
+            summary[k] = {"bias_mean": float((e - ref).mean()), "bias_sd": float((e - ref).std(ddof=1)),
+                          "rel_bias_mean": float((e / ref - 1).mean()), "E_sd": float(e.std(ddof=1))}
+        print(json.dumps(summary), flush=True)
+        out.append(summary | {"per_seed": rows})
     return out
 
 
@@ -249,14 +253,20 @@ def main_job(args) -> list[dict]:
     return out
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def problem_args(p: argparse.ArgumentParser) -> None:
+    """The problem's options (sensor, law, scenarios, variants, reference draws), shared with
+    bench_relaxation.py."""
     p.add_argument("--sensor", default="radar", choices=sorted(LAWS))
     p.add_argument("--law-config", type=Path, help="sensor TOML with the probabilistic [detection] law")
     p.add_argument("--scenarios", default="sc01")
     p.add_argument("--variants", type=int, default=1)
-    p.add_argument("--points", default="10,20,30,45,60,90", help="HFOV points [deg]; '' for none")
     p.add_argument("--draws", type=int, default=32)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    problem_args(p)
+    p.add_argument("--points", default="10,20,30,45,60,90", help="HFOV points [deg]; '' for none")
     p.add_argument("--mc-samples", type=int, default=8)
     p.add_argument("--grid", action="append", default=[], metavar="LO:HI:STEP",
                    help="also compare mean-field with E_ref on this HFOV grid [deg] (repeatable)")
