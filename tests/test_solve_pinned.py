@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from diffsense.errors import InputError
 from diffsense.solve import SolveConfig, solve
 from tests._analytic_objectives import HI, LO, bowl
 
@@ -93,3 +94,12 @@ def test_hard_polish_probe_sequence_reaches_an_unevaluated_bound(steps, hard_cen
     # after the sweep's two steps and E_hard at the soft optimum (~0.5, within tol):
     assert abs(hard_calls[2] - 0.5) <= 1 / 64 and hard_calls[3:] == probes
     assert res.r_star == hard_center and res.E_hard_star == 1.0 and res.on_bound
+
+
+def test_float64_outer_solve_needs_x64_and_float32_does_not():
+    e2, e_hard = bowl(1.3)
+    with jax.enable_x64(False):
+        with pytest.raises(InputError, match="needs jax_enable_x64"):
+            solve(e2, e_hard, (LO, HI))
+        res = solve(e2, e_hard, (LO, HI), config=SolveConfig(dtype="float32"))
+    assert abs(res.r_star - 1.3) <= SolveConfig().xtol_rel * (HI - LO)
