@@ -21,8 +21,8 @@ FIGURES = {
     "e_over_hfov.png": ("01_gradient_sensitivity", "HFOV = {}", 0),
     "baseline_hfov_30_180.png": ("03_grid_search_baseline", "curves_hfov, ref_hfov", 0),
     "baseline_hfov_5_60.png": ("03_grid_search_baseline", "curves_narrow, ref_narrow", 0),
-    "fig6_radar_shipped.png": ("04_case_study", "def horizon_curves", 0),
     "odd_camera.png": ("06_odd_sensitivity", "draw(CAMERA", 0),
+    "odd_radar.png": ("06_odd_sensitivity", "RADAR_RESULTS = {}", 0),
 }
 
 
