@@ -84,8 +84,8 @@ def test_hard_polish_probe_sequence_reaches_an_unevaluated_bound(steps, hard_cen
         hard_calls.append(float(r))
         return float(np.sqrt(1.0 + (float(r) - hard_center) ** 2))
 
-    def value_and_grad(r, tau):
-        return 1.0 + (r - 0.5) ** 2, 2.0 * (r - 0.5)
+    def value_and_grad(r, tau):  # E^2 = tau + (r - 0.5)^2: the bowl at tau = 1
+        return tau + (r - 0.5) ** 2, 2.0 * (r - 0.5)
 
     cfg = SolveConfig(tau_schedule=(1.0,), xtol_rel=1 / 64)
     res = solve(bowl(0.5)[0], e_hard, (0.0, 1.0), steps=steps, config=cfg,
@@ -94,6 +94,7 @@ def test_hard_polish_probe_sequence_reaches_an_unevaluated_bound(steps, hard_cen
     # after the sweep's two steps and E_hard at the soft optimum (~0.5, within tol):
     assert abs(hard_calls[2] - 0.5) <= 1 / 64 and hard_calls[3:] == probes
     assert res.r_star == hard_center and res.E_hard_star == 1.0 and res.on_bound
+    assert res.E_soft_star == pytest.approx(np.sqrt(1.25), abs=1e-15)  # at the polished r*
 
 
 def test_float64_outer_solve_needs_x64_and_float32_does_not():
@@ -102,4 +103,15 @@ def test_float64_outer_solve_needs_x64_and_float32_does_not():
         with pytest.raises(InputError, match="needs jax_enable_x64"):
             solve(e2, e_hard, (LO, HI))
         res = solve(e2, e_hard, (LO, HI), config=SolveConfig(dtype="float32"))
+    assert abs(res.r_star - 1.3) <= SolveConfig().xtol_rel * (HI - LO)
+
+
+def test_float32_secant_stays_in_float32():
+    # Every point the secant's levels land on is a float32 number (float64 arithmetic would
+    # leave the float32 grid), and the answer is the bowl's centre to the tolerance. (The
+    # bisection's walk steps in Python floats: its levels may end between float32 numbers.)
+    e2, e_hard = bowl(1.3)
+    res = solve(e2, e_hard, (LO, HI), config=SolveConfig(dtype="float32"))
+    for level in res.levels:
+        assert float(np.float32(level.r)) == level.r, level
     assert abs(res.r_star - 1.3) <= SolveConfig().xtol_rel * (HI - LO)
