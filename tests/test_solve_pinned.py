@@ -56,8 +56,12 @@ def test_later_levels_probe_near_the_previous_answer():
         calls.append((r, tau))
         return 1.0 + (r - 1.3) ** 2, 2.0 * (r - 1.3)
 
-    e2, e_hard = bowl(1.3)
-    res = solve(e2, e_hard, (LO, HI), value_and_grad=value_and_grad)
+    traced = []  # with a host value_and_grad, the secant and the sweep never trace e2_soft
+    _, e_hard = bowl(1.3)
+    res = solve(lambda r, tau: traced.append(r) or 1.0, e_hard, (LO, HI),
+                value_and_grad=value_and_grad)
+    assert traced == [] and [p.E_soft for p in res.sweep] == pytest.approx(
+        [np.sqrt(1.0 + (r - 1.3) ** 2) for r in np.deg2rad([30, 60, 90, 120, 150, 180])])
     points = {tau: [r for r, t in calls if t == tau] for tau in (4.0, 2.0)}
     r0, r1 = res.levels[0].r, res.levels[1].r
     assert points[4.0][:2] == pytest.approx([np.pi / 3, np.pi / 3 + np.pi / 12], abs=1e-12)
