@@ -1,0 +1,139 @@
+"""The relaxed-reference temperature against issue #13's targets, over seeds.
+
+    nice -n 10 python benchmarks/bench_relaxation.py [--sensor radar] [--grid LO:HI:STEP ...]
+        [--temperatures 0.01,0.003,0.001,0.0001] [--seeds 0] [--solve LO:HI ...]
+        [--solve-temperatures 0.01,0.001] [--json PATH]
+
+For each seed (scene variants, measurement noise and the reference's uniforms), on the problem of
+`bench_detection.py` (sc01, 1 variant, the sensor's probabilistic law, K = --draws):
+
+- agreement: on each --grid, E_ref at every point and relaxed-reference at every temperature
+  lambda of --temperatures (one compiled program: reference_temperature 1, the temperature given
+  as tau); the largest relative gap |E - E_ref| / E_ref, where, in E_ref's standard errors, and
+  the distance between the argmins. At the point of the largest gap, the smallest margin
+  |logit p - logit u| over every (draw, frame, vehicle) and how many margins are below lambda:
+  the draws near flipping, which a relaxation of width lambda leaves part-detected.
+- solve: on each --solve LO:HI, `diffsense.optimise` with relaxed-reference at each lambda of
+  --solve-temperatures (its default continuation 4, 2, 1 times lambda; the answer judged on
+  E_ref), E_ref(r*) against the best point of the 1-deg grid of E_ref on LO:HI (taken from an
+  agreement grid LO:HI:1 when there is one) and the evaluations it used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from bench_detection import LAWS, _problem, problem_args
+
+
+def _ref_grid(ev, r):
+    ref = [ev.reference(x) for x in r]
+    return np.array([float(x.e) for x in ref]), np.array([float(x.e_se) for x in ref])
+
+
+def _margins(E, r_deg, draws, lam):
+    """The smallest |logit p - logit u| over the reference's draws at r, and how many are below lam."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from diffsense.metrics._estimators import _clipped_logit
+    from diffsense.metrics._reference import reference_uniforms
+
+    p = eqx.filter_jit(lambda o, x: o._sensor_detections(o.point(x), "hard").p_detect)(E, jnp.asarray(r_deg))
+    u = jax.vmap(lambda d: reference_uniforms(E.data.noise_key, d, p.shape[1:], p.dtype))(jnp.arange(draws))
+    m = np.abs(np.asarray(_clipped_logit(p)[None] - _clipped_logit(u)))
+    return float(m.min()), int(np.sum(m < lam))
+
+
+def agreement(args, seed) -> list[dict]:
+    import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
+    from diffsense.solve import Evaluator
+
+    unit = EstimatorConfig(kind="relaxed-reference", reference_draws=args.draws, reference_temperature=1.0)
+    E = ds.objective(_problem(args, args.law, seed=seed, estimator=unit))
+    ev = Evaluator(E)
+    out = []
+    for text in args.grid:
+        lo, hi, step = (float(v) for v in text.split(":"))
+        r = np.arange(lo, hi + 0.5 * step, step)
+        ref, se = _ref_grid(ev, r)
+        row = {"seed": seed, "grid": text, "argmin_ref": float(r[ref.argmin()]), "E_ref": ref.tolist(),
+               "E_ref_se": se.tolist(), "r": r.tolist(), "by_temperature": {}}
+        for lam in args.temperatures:
+            e = np.array([np.sqrt(max(ev.e2_soft(x, lam), 0.0)) for x in r])
+            gap = np.abs(e - ref) / ref
+            i = int(gap.argmax())
+            smallest, below = _margins(E, r[i], args.draws, lam)
+            row["by_temperature"][str(lam)] = {
+                "max_rel_gap": float(gap.max()), "r_max_gap": float(r[i]),
+                "gap_in_se": float(abs(e - ref)[i] / se[i]) if se[i] > 0 else None,
+                "points_over_1pct": int(np.sum(gap > 0.01)), "argmin": float(r[e.argmin()]),
+                "argmin_distance": float(abs(r[e.argmin()] - r[ref.argmin()])),
+                "smallest_margin_at_max_gap": smallest, "margins_below_lambda_at_max_gap": below, "E": e.tolist()}
+            brief = {k: v for k, v in row["by_temperature"][str(lam)].items() if k != "E"}
+            print(json.dumps({"seed": seed, "grid": text, "lambda": lam} | brief), flush=True)
+        out.append(row)
+    return out
+
+
+def solves(args, seed, grids) -> list[dict]:
+    import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
+    from diffsense.solve import Evaluator
+
+    out = []
+    for text in args.solve:
+        lo, hi = (float(v) for v in text.split(":"))
+        known = next((g for g in grids if g["grid"] == f"{text}:1"), None)
+        if known is None:
+            ev = Evaluator(ds.objective(_problem(args, args.law, seed=seed)))
+            best = float(_ref_grid(ev, np.arange(lo, hi + 0.5, 1.0))[0].min())
+        else:
+            best = float(min(known["E_ref"]))
+        for lam in args.solve_temperatures:
+            est = EstimatorConfig(reference_draws=args.draws, reference_temperature=lam)
+            problem = _problem(args, args.law, seed=seed, params={"hfov_deg": (lo, hi)}, estimator=est)
+            t0 = time.perf_counter()
+            result = ds.optimise(problem, figures=False)
+            ref = result.reference
+            row = {"seed": seed, "interval": text, "lambda": lam, "grid_best_E_ref": best,
+                   "r_star": next(iter(result.r_star.values())), "E_ref_star": ref["E_ref_star"],
+                   "E_ref_star_se": ref["E_ref_star_se"], "rel_to_grid_best": ref["E_ref_star"] / best - 1.0,
+                   "sweep_steps": len(result.sweep), "objective": result.evaluations["objective"],
+                   "gradient": result.evaluations["gradient"], "notes": list(result.notes),
+                   "wall_s": time.perf_counter() - t0}
+            print(json.dumps(row), flush=True)
+            out.append(row)
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    problem_args(p)
+    p.add_argument("--grid", action="append", default=[], metavar="LO:HI:STEP", help="agreement grid [deg] (repeatable)")
+    p.add_argument("--temperatures", default="0.01,0.003,0.001,0.0001", help="lambda [logit units] of the agreement grids")
+    p.add_argument("--seeds", default="0")
+    p.add_argument("--solve", action="append", default=[], metavar="LO:HI", help="solve interval [deg] (repeatable)")
+    p.add_argument("--solve-temperatures", default="0.01", help="lambda [logit units] of the solves; '' for none")
+    p.add_argument("--json", type=Path)
+    args = p.parse_args()
+    args.law = str(args.law_config or LAWS[args.sensor])
+    args.temperatures = [float(v) for v in args.temperatures.split(",") if v]
+    args.solve_temperatures = [float(v) for v in args.solve_temperatures.split(",") if v]
+    report = {"args": {k: str(v) for k, v in vars(args).items()}, "agreement": [], "solve": []}
+    for seed in [int(v) for v in args.seeds.split(",")]:
+        grids = agreement(args, seed)
+        report["agreement"] += grids
+        report["solve"] += solves(args, seed, grids)
+        if args.json:  # written after every seed: a stopped run keeps what it finished
+            args.json.write_text(json.dumps(report, indent=1))
+
+
+if __name__ == "__main__":
+    main()
