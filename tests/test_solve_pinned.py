@@ -115,7 +115,29 @@ def test_float32_secant_stays_in_float32():
     # leave the float32 grid), and the answer is the bowl's centre to the tolerance. (The
     # bisection's walk steps in Python floats: its levels may end between float32 numbers.)
     e2, e_hard = bowl(1.3)
-    res = solve(e2, e_hard, (LO, HI), config=SolveConfig(dtype="float32"))
+    dtypes = set()  # of every r and tau the objectives are given, in the sweep too
+
+    def e2_seen(r, tau):
+        dtypes.update((jnp.asarray(r).dtype, jnp.asarray(tau).dtype))
+        return e2(r, tau)
+
+    def e_hard_seen(r):
+        dtypes.add(jnp.asarray(r).dtype)
+        return e_hard(r)
+
+    res = solve(e2_seen, e_hard_seen, (LO, HI), config=SolveConfig(dtype="float32"))
+    assert dtypes == {jnp.dtype("float32")}
     for level in res.levels:
         assert float(np.float32(level.r)) == level.r, level
     assert abs(res.r_star - 1.3) <= SolveConfig().xtol_rel * (HI - LO)
+
+
+def test_sweep_soft_column_is_at_the_last_temperature():
+    # E^2 = tau + (r - 1.3)^2 under the schedule (2, 0.5): the sweep reports E_soft at tau = 0.5.
+    def value_and_grad(r, tau):
+        return tau + (r - 1.3) ** 2, 2.0 * (r - 1.3)
+
+    steps = np.deg2rad([30.0, 60.0, 90.0, 120.0, 150.0, 180.0])
+    res = solve(bowl(1.3)[0], bowl(1.3)[1], (LO, HI), steps=steps,
+                config=SolveConfig(tau_schedule=(2.0, 0.5)), value_and_grad=value_and_grad)
+    assert [p.E_soft for p in res.sweep] == pytest.approx(np.sqrt(0.5 + (steps - 1.3) ** 2))
