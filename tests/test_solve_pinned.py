@@ -141,3 +141,16 @@ def test_sweep_soft_column_is_at_the_last_temperature():
     res = solve(bowl(1.3)[0], bowl(1.3)[1], (LO, HI), steps=steps,
                 config=SolveConfig(tau_schedule=(2.0, 0.5)), value_and_grad=value_and_grad)
     assert [p.E_soft for p in res.sweep] == pytest.approx(np.sqrt(0.5 + (steps - 1.3) ** 2))
+
+
+@pytest.mark.parametrize("tau_schedule", [(1.0,), (0.5,)])
+def test_a_level_tolerance_is_capped_at_an_eighth_of_the_bracket(tau_schedule):
+    # Interval (0, 2), best step 1, bracket (0, 2); xtol = 0.25 x 2 = 0.5 at the last level,
+    # whatever its temperature, capped to 2 / 8 = 0.25. Bisection from 1 towards the minimum
+    # 1.2: probe 1.25 (+) closes [1, 1.25], one tol wide: one halving at 1.125 (-), answer 1.1875.
+    e2, _ = bowl(1.2)
+    cfg = SolveConfig(method="bisection", tau_schedule=tau_schedule, xtol_rel=0.25, hard_polish=0)
+    res = solve(e2, bowl(1.0)[1], (0.0, 2.0), steps=[0.0, 1.0, 2.0], config=cfg)
+    level = res.levels[0]
+    assert res.bracket == (0.0, 2.0) and level.converged
+    assert level.r == 1.1875 and level.gradient_evaluations == 3
