@@ -145,12 +145,13 @@ def test_sweep_soft_column_is_at_the_last_temperature():
 
 @pytest.mark.parametrize("tau_schedule", [(1.0,), (0.5,)])
 def test_a_level_tolerance_is_capped_at_an_eighth_of_the_bracket(tau_schedule):
-    # Interval (0, 2), best step 1, bracket (0, 2); xtol = 0.25 x 2 = 0.5 at the last level,
-    # whatever its temperature, capped to 2 / 8 = 0.25. Bisection from 1 towards the minimum
-    # 1.2: probe 1.25 (+) closes [1, 1.25], one tol wide: one halving at 1.125 (-), answer 1.1875.
-    e2, _ = bowl(1.2)
+    # Interval (1, 3), best step 2, bracket (1, 3); xtol = 0.25 x 2 = 0.5 at the last level,
+    # whatever its temperature, capped to (3 - 1) / 8 = 0.25. Bisection from 2 towards the
+    # minimum 2.2: probe 2.25 (+) closes [2, 2.25], one tol wide: one halving at 2.125 (-),
+    # answer 2.1875.
+    e2, _ = bowl(2.2)
     cfg = SolveConfig(method="bisection", tau_schedule=tau_schedule, xtol_rel=0.25, hard_polish=0)
-    res = solve(e2, bowl(1.0)[1], (0.0, 2.0), steps=[0.0, 1.0, 2.0], config=cfg)
+    res = solve(e2, bowl(2.0)[1], (1.0, 3.0), steps=[1.0, 2.0, 3.0], config=cfg)
     level = res.levels[0]
-    assert res.bracket == (0.0, 2.0) and level.converged
-    assert level.r == 1.1875 and level.gradient_evaluations == 3
+    assert res.bracket == (1.0, 3.0) and level.converged
+    assert level.r == 2.1875 and level.gradient_evaluations == 3
