@@ -48,8 +48,8 @@ def test_later_levels_probe_near_the_previous_answer():
     # The secant on the bowl E^2 = 1 + (r - 1.3)^2 from the 60-deg step, bracket (30, 90) deg
     # = pi/3 rad wide. The first level probes a quarter bracket (pi/12) away; the second level,
     # warm-started at the first's answer r0 (g > 0 there: it probes downhill), 1/16 of the
-    # bracket (pi/48) away; the third, by the second level's move, at least 2 tol (tol =
-    # xtol_rel x 150 deg = 0.0026 rad): well inside the second level's step.
+    # bracket (pi/48) away; the third by the larger of the second level's move and twice the
+    # second level's tolerance.
     calls = []
 
     def value_and_grad(r, tau):
@@ -67,7 +67,9 @@ def test_later_levels_probe_near_the_previous_answer():
     assert points[4.0][:2] == pytest.approx([np.pi / 3, np.pi / 3 + np.pi / 12], abs=1e-12)
     assert points[2.0][:2] == pytest.approx([r0, r0 - np.pi / 48], abs=1e-12)
     third = [r for r, t in calls[len(res.sweep):] if t == 1.0]
-    assert third[0] == r1 and 2 * 0.0026 < abs(third[1] - r1) < np.pi / 48
+    # 2 tol of the second level (tau = 2: tol = 2 xtol) beats its move |r1 - r0| (< xtol)
+    xtol = SolveConfig().xtol_rel * (HI - LO)
+    assert abs(r1 - r0) < xtol and third[:2] == pytest.approx([r1, r1 - 4 * xtol], abs=1e-12)
 
 
 # The compass search probe by probe, on an interval (0, 1) whose steps leave one end unevaluated:
