@@ -44,12 +44,9 @@ def test_bisection_reports_a_gradient_not_finite_throughout_its_bracket():
         solve(e2, e_hard, (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=WALK)
 
 
-def test_later_levels_probe_near_the_previous_answer():
-    # The secant on the bowl E^2 = 1 + (r - 1.3)^2 from the 60-deg step, bracket (30, 90) deg
-    # = pi/3 rad wide. The first level probes a quarter bracket (pi/12) away; the second level,
-    # warm-started at the first's answer r0 (g > 0 there: it probes downhill), 1/16 of the
-    # bracket (pi/48) away; the third by the larger of the second level's move and twice the
-    # second level's tolerance.
+def _secant_on_the_bowl(config: SolveConfig):
+    """The secant on E^2 = 1 + (r - 1.3)^2 through a host value_and_grad: (result, the points
+    each temperature's gradient was asked at, in order)."""
     calls = []
 
     def value_and_grad(r, tau):
@@ -57,19 +54,35 @@ def test_later_levels_probe_near_the_previous_answer():
         return 1.0 + (r - 1.3) ** 2, 2.0 * (r - 1.3)
 
     traced = []  # with a host value_and_grad, the secant and the sweep never trace e2_soft
-    _, e_hard = bowl(1.3)
-    res = solve(lambda r, tau: traced.append(r) or 1.0, e_hard, (LO, HI),
+    res = solve(lambda r, tau: traced.append(r) or 1.0, bowl(1.3)[1], (LO, HI), config=config,
                 value_and_grad=value_and_grad)
     assert traced == [] and [p.E_soft for p in res.sweep] == pytest.approx(
         [np.sqrt(1.0 + (r - 1.3) ** 2) for r in np.deg2rad([30, 60, 90, 120, 150, 180])])
-    points = {tau: [r for r, t in calls if t == tau] for tau in (4.0, 2.0)}
+    after_sweep = calls[len(res.sweep):]
+    return res, {tau: [r for r, t in after_sweep if t == tau] for tau in config.tau_schedule}
+
+
+def test_later_levels_probe_near_the_previous_answer():
+    # From the 60-deg step, bracket (30, 90) deg = pi/3 rad wide. The first level probes a
+    # quarter bracket (pi/12) away; the second level, warm-started at the first's answer r0
+    # (g > 0 there: it probes downhill), 1/16 of the bracket (pi/48) away; the third by the
+    # larger of the second level's move and twice the second level's tolerance.
+    res, points = _secant_on_the_bowl(SolveConfig())
     r0, r1 = res.levels[0].r, res.levels[1].r
     assert points[4.0][:2] == pytest.approx([np.pi / 3, np.pi / 3 + np.pi / 12], abs=1e-12)
     assert points[2.0][:2] == pytest.approx([r0, r0 - np.pi / 48], abs=1e-12)
-    third = [r for r, t in calls[len(res.sweep):] if t == 1.0]
     # 2 tol of the second level (tau = 2: tol = 2 xtol) beats its move |r1 - r0| (< xtol)
     xtol = SolveConfig().xtol_rel * (HI - LO)
-    assert abs(r1 - r0) < xtol and third[:2] == pytest.approx([r1, r1 - 4 * xtol], abs=1e-12)
+    assert abs(r1 - r0) < xtol and points[1.0][:2] == pytest.approx([r1, r1 - 4 * xtol], abs=1e-12)
+
+
+def test_second_level_probes_twice_the_first_tolerance_when_that_is_wider():
+    # xtol_rel = 0.006: the first level's tol (tau = 4) is 4 x 0.006 x 150 deg = 0.0628 rad,
+    # twice that (0.126) beats 1/16 of the bracket (0.065): the second level's first probe.
+    res, points = _secant_on_the_bowl(SolveConfig(xtol_rel=0.006))
+    r0 = res.levels[0].r
+    assert points[2.0][0] == r0
+    assert abs(points[2.0][1] - r0) == pytest.approx(8 * 0.006 * (HI - LO), abs=1e-12)
 
 
 # The compass search probe by probe, on an interval (0, 1) whose steps leave one end unevaluated:
