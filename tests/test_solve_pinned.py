@@ -170,3 +170,13 @@ def test_a_level_tolerance_is_capped_at_an_eighth_of_the_bracket(tau_schedule):
     level = res.levels[0]
     assert res.bracket == (1.0, 3.0) and level.converged
     assert level.r == 2.1875 and level.gradient_evaluations == 3
+
+
+@pytest.mark.parametrize("method", ["secant", "bisection"])
+def test_soft_minimum_pressing_on_a_bracket_edge_is_noted(method):
+    # E_hard's bowl at 0.6 makes 30 deg the best step (bracket (30, 60) deg); the soft bowl's
+    # minimum 1.3 lies beyond 60 deg = 1.0472 rad, an edge of the bracket but not of the interval.
+    res = solve(bowl(1.3)[0], bowl(0.6)[1], (LO, HI), config=SolveConfig(method=method))
+    assert res.levels[-1].r == pytest.approx(np.pi / 3) and res.levels[-1].bound == 1
+    assert any(n.startswith("the soft minimum at tau=1 presses on the bracket edge r=1.0472")
+               for n in res.notes), res.notes
