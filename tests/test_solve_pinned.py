@@ -10,7 +10,7 @@ import pytest
 
 from diffsense.errors import InputError
 from diffsense.solve import SolveConfig, solve
-from tests._analytic_objectives import HI, LO, bowl
+from tests._analytic_objectives import HI, LO, bowl, dip_at, ripple
 
 # Interval (0, 1), steps 0, 0.5, 1, one level with tol = 1/128 (exact in binary).
 WALK = SolveConfig(method="bisection", tau_schedule=(1.0,), xtol_rel=1 / 128, hard_polish=0,
@@ -180,3 +180,46 @@ def test_soft_minimum_pressing_on_a_bracket_edge_is_noted(method):
     assert res.levels[-1].r == pytest.approx(np.pi / 3) and res.levels[-1].bound == 1
     assert any(n.startswith("the soft minimum at tau=1 presses on the bracket edge r=1.0472")
                for n in res.notes), res.notes
+
+
+def test_an_earlier_level_answer_wins_when_the_last_is_worse_than_the_best_step():
+    # The rippled bowl's three levels (tau 4, 2, 1) answer r0, r1, r2; E_hard is made 1 m worse
+    # within 0.003 rad of r0 and r2 only (no sweep step is that close, so the bracket and the
+    # levels stay the same): of r2, r0, r1 and the best step, r1 is best on E_hard.
+    e2, e_hard = ripple(1.3)
+    plain = solve(e2, e_hard, (LO, HI), config=SolveConfig(hard_polish=0))
+    r0, r1, r2 = (level.r for level in plain.levels)
+
+    def e_hard_penalised(r):
+        r = jnp.asarray(r)
+        return e_hard(r) + 1.0 * ((jnp.abs(r - r2) < 0.003) | (jnp.abs(r - r0) < 0.003))
+
+    res = solve(e2, e_hard_penalised, (LO, HI), config=SolveConfig(hard_polish=0))
+    assert [level.r for level in res.levels] == [r0, r1, r2]
+    assert res.r_star == r1 and res.E_hard_star == pytest.approx(float(e_hard(r1)))
+    assert any("is the best of 4 candidates" in n for n in res.notes), res.notes
+
+
+def test_earlier_levels_are_not_candidates_beyond_the_budget():
+    # E_hard is good only within 0.01 rad of the 90-deg step; with 11 evaluations the levels
+    # spend 9 gradients and E_hard at the soft optimum 1 more: the one left is kept for E_soft,
+    # so no earlier level is evaluated and the best step wins among 2 candidates.
+    r_step = float(np.deg2rad(90.0))
+    e2, e_hard = dip_at(r_step, center=1.3)
+    hard_calls = []
+    res = solve(e2, lambda r: hard_calls.append(float(r)) or e_hard(r), (LO, HI),
+                config=SolveConfig(max_evaluations=11, hard_polish=0))
+    assert res.evaluations == {"objective": 1, "gradient": 9}
+    assert hard_calls[len(res.sweep):] == [res.levels[-1].r] and res.r_star == r_step
+    assert any("is the best of 2 candidates" in n for n in res.notes), res.notes
+
+
+def test_a_soft_optimum_tying_the_best_step_on_e_hard_is_kept_without_a_note():
+    # E_hard is 1 m everywhere: the soft optimum (1.3) ties the best step (60 deg, the smaller
+    # E_soft) and is kept as it is: no other candidate evaluated, no polish move, no note.
+    e2, _ = bowl(1.3)
+    hard_calls = []
+    res = solve(e2, lambda r: hard_calls.append(float(r)) or 1.0, (LO, HI),
+                config=SolveConfig(hard_polish=0))
+    assert res.r_star == res.levels[-1].r and res.E_hard_star == 1.0 and res.notes == ()
+    assert hard_calls[len(res.sweep):] == [res.r_star]
