@@ -197,21 +197,39 @@ def test_an_earlier_level_answer_wins_when_the_last_is_worse_than_the_best_step(
     res = solve(e2, e_hard_penalised, (LO, HI), config=SolveConfig(hard_polish=0))
     assert [level.r for level in res.levels] == [r0, r1, r2]
     assert res.r_star == r1 and res.E_hard_star == pytest.approx(float(e_hard(r1)))
-    assert any("is the best of 4 candidates" in n for n in res.notes), res.notes
+    note = f"has E_hard={float(e_hard_penalised(r2)):.6g} m, worse than the best step"
+    assert any("is the best of 4 candidates" in n and note in n for n in res.notes), res.notes
 
 
-def test_earlier_levels_are_not_candidates_beyond_the_budget():
-    # E_hard is good only within 0.01 rad of the 90-deg step; with 11 evaluations the levels
-    # spend 9 gradients and E_hard at the soft optimum 1 more: the one left is kept for E_soft,
-    # so no earlier level is evaluated and the best step wins among 2 candidates.
+@pytest.mark.parametrize("budget", [11, 13])
+def test_earlier_levels_are_not_candidates_beyond_the_budget(budget):
+    # E_hard is good only within 0.01 rad of the 90-deg step. After the levels' gradients and
+    # E_hard at the soft optimum, earlier levels are evaluated while more than one evaluation
+    # is left (the last is kept for E_soft): none at 11 (9 + 1 spent), the first at 13 (10 + 1).
     r_step = float(np.deg2rad(90.0))
     e2, e_hard = dip_at(r_step, center=1.3)
     hard_calls = []
     res = solve(e2, lambda r: hard_calls.append(float(r)) or e_hard(r), (LO, HI),
-                config=SolveConfig(max_evaluations=11, hard_polish=0))
-    assert res.evaluations == {"objective": 1, "gradient": 9}
-    assert hard_calls[len(res.sweep):] == [res.levels[-1].r] and res.r_star == r_step
-    assert any("is the best of 2 candidates" in n for n in res.notes), res.notes
+                config=SolveConfig(max_evaluations=budget, hard_polish=0))
+    spent = res.evaluations["gradient"] + 1
+    earlier = min(2, budget - 1 - spent)
+    assert earlier == {11: 0, 13: 1}[budget]
+    assert hard_calls[len(res.sweep):] == [lv.r for lv in res.levels[-1:] + res.levels[:earlier]]
+    assert res.evaluations["objective"] == 1 + earlier and res.r_star == r_step
+    assert any(f"is the best of {2 + earlier} candidates" in n for n in res.notes), res.notes
+
+
+def test_an_earlier_level_tying_the_best_step_is_preferred():
+    # E_hard is 2 m within 0.003 rad of the last level's answer (which holds the second level's
+    # too, 0.0013 away), 1 m elsewhere: the first level's answer ties the best step (60 deg) and
+    # is preferred to it.
+    e2, _ = bowl(1.3)
+    plain = solve(e2, bowl(1.3)[1], (LO, HI), config=SolveConfig(hard_polish=0))
+    r0, r1, r2 = (level.r for level in plain.levels)
+    assert abs(r1 - r2) < 0.003 < abs(r0 - r2)
+    res = solve(e2, lambda r: 1.0 + 1.0 * (jnp.abs(jnp.asarray(r) - r2) < 0.003), (LO, HI),
+                config=SolveConfig(hard_polish=0))
+    assert res.r_star == r0 and res.E_hard_star == 1.0
 
 
 def test_a_soft_optimum_tying_the_best_step_on_e_hard_is_kept_without_a_note():
