@@ -88,15 +88,17 @@ def test_second_level_probes_twice_the_first_tolerance_when_that_is_wider():
 # The compass search probe by probe, on an interval (0, 1) whose steps leave one end unevaluated:
 # the soft bowl's minimum 0.5 is worse on E_hard than the best step, so the polish starts there.
 # Bracket (0, 1): first step 1/16; xtol_rel = 1/64 makes 1/64 the finest step it may take.
-@pytest.mark.parametrize("steps, hard_center, probes", [
+@pytest.mark.parametrize("steps, hard_center, polish, probes", [
     # from 0.0625: 0.125 (worse), 0.0 (better, the bound: moves); from 0: 0.0625 (worse), -0.0625
     # (outside: free); 1/32: 0.03125 (worse), 1/64: 0.015625 (worse); 1/128 is finer than 1/64.
-    ([0.0625, 1.0], 0.0, [0.125, 0.0, 0.0625, 0.03125, 0.015625]),
+    ([0.0625, 1.0], 0.0, 6, [0.125, 0.0, 0.0625, 0.03125, 0.015625]),
     # from 0.9375: 1.0 (better, the bound: moves); from 1: 1.0625 (outside: free, the other side
     # is still probed) 0.9375 (worse); 1/32: 0.96875 (worse); 1/64: 0.984375 (worse).
-    ([0.0, 0.9375], 1.0, [1.0, 0.9375, 0.96875, 0.984375]),
+    ([0.0, 0.9375], 1.0, 6, [1.0, 0.9375, 0.96875, 0.984375]),
+    ([0.0, 0.9375], 1.0, 1, [1.0]),  # a polish of one probe
 ])
-def test_hard_polish_probe_sequence_reaches_an_unevaluated_bound(steps, hard_center, probes):
+def test_hard_polish_probe_sequence_reaches_an_unevaluated_bound(steps, hard_center, polish,
+                                                                probes):
     hard_calls = []
 
     def e_hard(r):
@@ -106,7 +108,7 @@ def test_hard_polish_probe_sequence_reaches_an_unevaluated_bound(steps, hard_cen
     def value_and_grad(r, tau):  # E^2 = tau + (r - 0.5)^2: the bowl at tau = 1
         return tau + (r - 0.5) ** 2, 2.0 * (r - 0.5)
 
-    cfg = SolveConfig(tau_schedule=(1.0,), xtol_rel=1 / 64)
+    cfg = SolveConfig(tau_schedule=(1.0,), xtol_rel=1 / 64, hard_polish=polish)
     res = solve(bowl(0.5)[0], e_hard, (0.0, 1.0), steps=steps, config=cfg,
                 value_and_grad=value_and_grad)
     assert res.bracket == (0.0, 1.0)
