@@ -3,6 +3,8 @@ docs/mutation.md's solve run)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -243,3 +245,18 @@ def test_a_soft_optimum_tying_the_best_step_on_e_hard_is_kept_without_a_note():
                 config=SolveConfig(hard_polish=0))
     assert res.r_star == res.levels[-1].r and res.E_hard_star == 1.0 and res.notes == ()
     assert hard_calls[len(res.sweep):] == [res.r_star]
+
+
+def test_a_level_overspending_its_share_stops_the_continuation_with_notes():
+    # Two levels (tol 1/64, then 1/128). The first walks from 0.5 by 1/64, 3/64, 7/64 to the
+    # bracket [0.546875, 0.609375] around the minimum 0.6, inside which dE^2/dr is NaN: the
+    # halving cannot meet its |g| test and runs on until its midpoint reaches the lower end
+    # (about 50 evaluations), past the budget of 12. The second level is not started and the
+    # excess is noted.
+    e2 = _bowl_with_nan_gradient(0.6, 0.546875, 0.609375)
+    cfg = dataclasses.replace(WALK, tau_schedule=(2.0, 1.0))
+    res = solve(e2, bowl(0.5)[1], (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
+    assert len(res.levels) == 1 and res.levels[0].gradient_evaluations > 12
+    total = res.evaluations["objective"] + res.evaluations["gradient"]
+    assert res.notes[0] == "budget spent before tau=1: continuation stopped early"
+    assert f"{total} evaluations exceed the budget of 12" in res.notes
