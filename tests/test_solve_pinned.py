@@ -19,8 +19,8 @@ WALK = SolveConfig(method="bisection", tau_schedule=(1.0,), xtol_rel=1 / 128, ha
                    max_evaluations=12)
 
 
-def _bowl_with_nan_gradient(center: float, nan_from: float, nan_to: float):
-    """E^2 = 1 + (r - center)^2 whose dE^2/dr is NaN on the open interval (nan_from, nan_to)."""
+def _bowl_with_nan_gradient(center: float, nan_at):
+    """E^2 = 1 + (r - center)^2 whose dE^2/dr is NaN where `nan_at(r)` is true."""
 
     @jax.custom_jvp
     def e2(r, tau):
@@ -30,7 +30,7 @@ def _bowl_with_nan_gradient(center: float, nan_from: float, nan_to: float):
     @e2.defjvp
     def _jvp(primals, tangents):
         r, _ = primals
-        slope = jnp.where((r > nan_from) & (r < nan_to), jnp.nan, 2.0 * (r - center))
+        slope = jnp.where(nan_at(r), jnp.nan, 2.0 * (r - center))
         return e2(*primals), slope * tangents[0]
 
     return e2
@@ -40,7 +40,7 @@ def test_bisection_reports_a_gradient_not_finite_throughout_its_bracket():
     # Minimum at 0.004: the walk down from 0.5 probes 0.5 - tol (2^k - 1), all g > 0, down to
     # 0.0078125 and then 0.0 (clipped, g < 0): the bracket [0, 0.0078125]. Every point the
     # halving asks for lies inside it, where g is NaN: an error, not an answer.
-    e2 = _bowl_with_nan_gradient(0.004, 0.0, 0.0078125)
+    e2 = _bowl_with_nan_gradient(0.004, lambda r: (r > 0.0) & (r < 0.0078125))
     _, e_hard = bowl(0.5)  # the hard objective makes 0.5 the best step
     with pytest.raises(FloatingPointError, match=r"not finite in \[0.0, 0.0078125\]"):
         solve(e2, e_hard, (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=WALK)
@@ -253,10 +253,24 @@ def test_a_level_overspending_its_share_stops_the_continuation_with_notes():
     # halving cannot meet its |g| test and runs on until its midpoint reaches the lower end
     # (about 50 evaluations), past the budget of 12. The second level is not started and the
     # excess is noted.
-    e2 = _bowl_with_nan_gradient(0.6, 0.546875, 0.609375)
+    e2 = _bowl_with_nan_gradient(0.6, lambda r: (r > 0.546875) & (r < 0.609375))
     cfg = dataclasses.replace(WALK, tau_schedule=(2.0, 1.0))
     res = solve(e2, bowl(0.5)[1], (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
     assert len(res.levels) == 1 and res.levels[0].gradient_evaluations > 12
     total = res.evaluations["objective"] + res.evaluations["gradient"]
     assert res.notes[0] == "budget spent before tau=1: continuation stopped early"
     assert f"{total} evaluations exceed the budget of 12" in res.notes
+
+
+def test_a_later_level_left_one_evaluation_still_runs():
+    # As above, but dE^2/dr is NaN only at the first level's third halving point 0.6015625 and
+    # at the 0.59765625 that follows: two extra halvings (0.59765625, 0.595703125), 7 + 2 = 9
+    # gradient evaluations ending at the midpoint of [0.595703125, 0.59765625], leave the second
+    # level 12 - 9 - 2 = 1: it evaluates g at its start and stops there, not converged.
+    e2 = _bowl_with_nan_gradient(0.6, lambda r: (r == 0.6015625) | (r == 0.59765625))
+    cfg = dataclasses.replace(WALK, tau_schedule=(2.0, 1.0))
+    res = solve(e2, bowl(0.5)[1], (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
+    first, second = res.levels
+    assert (first.r, first.gradient_evaluations) == (0.5966796875, 9)
+    assert (second.r, second.gradient_evaluations, second.converged) == (0.5966796875, 1, False)
+    assert "tau=1: stopped after 1 gradient evaluations (budget share)" in res.notes
