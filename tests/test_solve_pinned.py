@@ -4,6 +4,7 @@ docs/mutation.md's solve run)."""
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import jax
 import jax.numpy as jnp
@@ -274,3 +275,12 @@ def test_a_later_level_left_one_evaluation_still_runs():
     assert (first.r, first.gradient_evaluations) == (0.5966796875, 9)
     assert (second.r, second.gradient_evaluations, second.converged) == (0.5966796875, 1, False)
     assert "tau=1: stopped after 1 gradient evaluations (budget share)" in res.notes
+
+
+def test_result_reports_its_schedule_interval_and_wall_times():
+    start = time.perf_counter()
+    res = solve(*bowl(1.3), (LO, HI), config=SolveConfig(tau_schedule=(3.0, 1.5)))
+    elapsed = time.perf_counter() - start
+    assert res.tau_schedule == (3.0, 1.5) and res.interval == (LO, HI)
+    assert set(res.wall_s) == {"sweep", "solve"} and min(res.wall_s.values()) >= 0.0
+    assert res.wall_s["sweep"] + res.wall_s["solve"] <= elapsed
