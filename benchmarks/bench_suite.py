@@ -23,7 +23,10 @@ of 7 at random points). The hard program computes E alone (`e_hard` below; the E
 program also computes per-scenario RMSE curves, which would overcharge the baselines). Every run
 starts with empty memos (nothing is reused across runs). The table gives, per d, the best J any
 run found, each method's median final J over the seeds, and the evaluations each needs to come
-within 1 % of that best (median over seeds; runs that never do count as never). Needs the
+within 1 % of that best (median over seeds; runs that never do count as never), and the soft J
+(final temperature) at each method's best point: whether the surrogate the gradient descends ranks
+the answers as the hard J does. Below it, J_hard and J_soft along the segment from the gradient's
+best answer to the best point any run found. Needs the
 `suite-bench` extra (cma, optuna). Writes summary.json and best_vs_evaluations.png under --out.
 """
 
@@ -135,14 +138,22 @@ def run_gradient(E, cost_fn, bounds, lam, budget, c, seed):
         spent += c if e.kind == "soft" else 1.0
         if e.kind == "hard":
             trace.append((spent, e.value + lam * cost_fn(e.x)[0]))
-    return trace, {"x_star": result.x_star, "on_bound": result.on_bound, "counts": result.counts}
+    x_best = min(((e.value + lam * cost_fn(e.x)[0], e.x) for e in result.history if e.kind == "hard"),
+                 key=lambda t: t[0])[1]
+    return trace, {"x_star": result.x_star, "on_bound": result.on_bound, "counts": result.counts,
+                   "x_best": [float(v) for v in np.asarray(x_best)]}
 
 
 def _hard_j(E, cost_fn, lam, lo, width):
+    """J_hard on the unit cube; j.best holds [J, x] of the lowest point it evaluated."""
     def j(u):
         x = lo + width * np.clip(u, 0.0, 1.0)
-        return e_hard(E, x) + lam * cost_fn(x)[0]
+        value = e_hard(E, x) + lam * cost_fn(x)[0]
+        if value < j.best[0]:
+            j.best = [value, x.tolist()]
+        return value
 
+    j.best = [math.inf, None]
     return j
 
 
@@ -159,7 +170,7 @@ def run_cma(E, cost_fn, bounds, lam, budget, seed):
         if len(values) < len(xs):
             break
         es.tell(xs, values)
-    return trace, {}
+    return trace, {"x_best": j.best[1]}
 
 
 def run_tpe(E, cost_fn, bounds, lam, budget, seed):
@@ -175,13 +186,14 @@ def run_tpe(E, cost_fn, bounds, lam, budget, seed):
         return trace[-1][1]
 
     optuna.create_study(sampler=optuna.samplers.TPESampler(seed=seed)).optimize(objective, n_trials=budget)
-    return trace, {}
+    return trace, {"x_best": j.best[1]}
 
 
 def run_random(E, cost_fn, bounds, lam, budget, seed):
     lo, width = bounds[:, 0], bounds[:, 1] - bounds[:, 0]
     j = _hard_j(E, cost_fn, lam, lo, width)
-    return [(i + 1.0, j(u)) for i, u in enumerate(np.random.default_rng(seed).random((budget, len(lo))))], {}
+    trace = [(i + 1.0, j(u)) for i, u in enumerate(np.random.default_rng(seed).random((budget, len(lo))))]
+    return trace, {"x_best": j.best[1]}
 
 
 def to_within(trace, target: float) -> float:
@@ -231,6 +243,7 @@ def compare(d, args, predictor):
                         "evaluations_to_1pct_median": float(np.median(reach)),
                         "reached": int(sum(math.isfinite(x) for x in reach)),
                         "evaluations_to_1pct": [x if math.isfinite(x) else None for x in reach]}
+    soft_vs_hard(E, cost_fn, args.cost_weight, runs, rows)
     baseline = min(rows[m]["evaluations_to_1pct_median"] for m in METHODS[1:])
     grad = rows["gradient"]["evaluations_to_1pct_median"]
     # No baseline's median run got within 1 % inside the budget: the ratio is below grad / budget.
@@ -238,22 +251,52 @@ def compare(d, args, predictor):
     bound = "=" if math.isfinite(baseline) or not math.isfinite(grad) else "<"
     return {"d": d, "names": list(PARAMS[d]), "bounds": bounds.tolist(), "c": c, "t_hard_s": t_hard,
             "t_value_and_grad_s": t_vg, "budget": budget, "best_J": best, "rows": rows,
-            "gradient_over_best_baseline": ratio if math.isfinite(ratio) else None, "ratio_is": bound, "runs": runs}
+            "gradient_over_best_baseline": ratio if math.isfinite(ratio) else None, "ratio_is": bound, "runs": runs,
+            "line": line_scan(E, cost_fn, args.cost_weight, runs)}
+
+
+def soft_j(E, cost_fn, lam, x, tau=LEVELS[-1]) -> float:
+    """The soft J the gradient solve descends at its final temperature [m]."""
+    return math.sqrt(e2_soft(E, x, tau)[0]) + lam * cost_fn(np.asarray(x))[0]
+
+
+def soft_vs_hard(E, cost_fn, lam, runs, rows):
+    """Each run's best point scored by the soft J too: does the surrogate rank the answers as J_hard does?"""
+    for method, rs in runs.items():
+        for r in rs:
+            r["J_soft_at_best"] = soft_j(E, cost_fn, lam, r["x_best"])
+        rows[method]["J_soft_at_best_median"] = float(np.median([r["J_soft_at_best"] for r in rs]))
+
+
+def line_scan(E, cost_fn, lam, runs, points=11):
+    """J_hard and J_soft on the segment from the gradient's best answer (t = 0) to the best point any
+    run found (t = 1): where the two disagree, descending the soft J leads away from the hard optimum."""
+    best_of = lambda r: min(v for _, v in r["trace"])  # noqa: E731
+    start = min(runs["gradient"], key=best_of)["x_best"]
+    end = min((r for rs in runs.values() for r in rs), key=best_of)["x_best"]
+    out = []
+    for t in np.linspace(0.0, 1.0, points):
+        x = np.asarray(start) + t * (np.asarray(end) - np.asarray(start))
+        out.append({"t": float(t), "J_hard": e_hard(E, x) + lam * cost_fn(x)[0], "J_soft": soft_j(E, cost_fn, lam, x)})
+    return out
 
 
 def report(results, args):
     print(f"\nJ = E + {args.cost_weight:g} * cost [m]; evaluations to within 1 % of the best J any run found "
           f"(median over {args.seeds} seeds; reached = runs that got there)")
-    print(f"{'d':>3} {'method':<9} {'median final J':>15} {'evals to 1 %':>13} {'reached':>8}")
+    print(f"{'d':>3} {'method':<9} {'median final J':>15} {'soft J there':>13} {'evals to 1 %':>13} {'reached':>8}")
     for res in results:
         for method, row in res["rows"].items():
             e = row["evaluations_to_1pct_median"]
-            print(f"{res['d']:>3} {method:<9} {row['final_J_median']:>15.4f} "
+            print(f"{res['d']:>3} {method:<9} {row['final_J_median']:>15.4f} {row['J_soft_at_best_median']:>13.4f} "
                   f"{(f'{e:.0f}' if math.isfinite(e) else 'never'):>13} {row['reached']:>5}/{args.seeds}")
         ratio = res["gradient_over_best_baseline"]
         text = "undefined (no median run got within 1 %)" if ratio is None else f"{res['ratio_is']} {ratio:.2f}"
         print(f"    best J {res['best_J']:.4f}; gradient / best baseline evaluations {text} "
               "(target <= 0.2 at d = 8, 16)")
+        print("    from the gradient's best answer (t 0) to the best point found (t 1): t J_hard J_soft")
+        for p in res["line"]:
+            print(f"      {p['t']:.1f} {p['J_hard']:9.4f} {p['J_soft']:9.4f}")
     import matplotlib
 
     matplotlib.use("Agg")

@@ -53,6 +53,8 @@ FACTS = {
 })
 """,
 
+    "05": _DUMP + """dump({str(d): res for d, res in RESULTS.items()})
+""",
     "06": _DUMP + """dump({"rows": [vars(r) for r in ROWS], "checks": [vars(c) for c in checks(ROWS)],
       "interval": list(CAMERA_HFOV_DEG), "grids": {"rain_mm_h": RAIN_MM_H, "fog_visibility_m": FOG_VISIBILITY_M,
                                                   "traffic_speed_kmh": SPEED_OFFSET_KMH}})
@@ -62,7 +64,7 @@ FACTS = {
 
 def test_the_notebooks_exist():
     names = [p.name[:2] for p in PATHS]
-    assert {"01", "02", "03", "04", "06"} <= set(names), names
+    assert {"01", "02", "03", "04", "05", "06"} <= set(names), names
 
 
 @pytest.mark.parametrize("path", PATHS, ids=[p.stem for p in PATHS])
@@ -209,6 +211,28 @@ def test_04_fast_case_study_claims(tmp_path_factory):
     assert f["timeline"]["name"] == "sc01"
     shares = {row[0]: row[1] for row in f["timeline"]["shares"]}
     assert round(shares["radar physical 30 deg"], 2) == 0.79 and shares["radar physical 180 deg"] == 1.0, shares
+
+
+@pytest.mark.slow
+def test_05_fast_suite_claims(tmp_path_factory):
+    (res,) = _fast_facts("05", tmp_path_factory).values()
+    assert res["d"] == 4 and set(res["runs"]) == {"gradient", "CMA-ES", "TPE", "random"}
+    best_of = lambda r: min(v for _, v in r["trace"])  # noqa: E731
+    # Equal budgets: no method spends more than the budget, the baselines exactly it.
+    for method, runs in res["runs"].items():
+        for r in runs:
+            assert r["trace"][-1][0] <= res["budget"], method
+            if method != "gradient":
+                assert len(r["trace"]) == res["budget"], method
+    # "the best J any run found" is the least of every trace, and the 1 % target follows from it.
+    assert res["best_J"] == min(best_of(r) for rs in res["runs"].values() for r in rs)
+    for r in res["runs"]["gradient"]:
+        for (lo, hi), name in zip(res["bounds"], res["names"]):
+            assert lo <= r["x_star"][name] <= hi, name
+    # The segment: t = 0 is the gradient's best answer, t = 1 the best point found (re-evaluated).
+    line = res["line"]
+    assert line[0]["J_hard"] == pytest.approx(min(best_of(r) for r in res["runs"]["gradient"]), rel=1e-9)
+    assert line[-1]["J_hard"] == pytest.approx(res["best_J"], rel=1e-9)
 
 
 @pytest.mark.slow
