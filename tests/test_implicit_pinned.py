@@ -1,0 +1,42 @@
+"""`argmin` and `argmin_derivative` pinned by hand (each test kills a surviving mutant of
+docs/mutation.md's solve run): the start, the default tolerance, the dtype."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense.solve import argmin
+
+
+def _two_minima(r, theta):
+    """E^2 = (r - 0.5)^2 (r - 2.5)^2 + theta: minima at 0.5 and 2.5, a maximum at 1.5."""
+    return (r - 0.5) ** 2 * (r - 2.5) ** 2 + theta
+
+
+@pytest.mark.parametrize("upper, r0, minimum", [
+    (4.0, None, 2.5),  # the middle of [0, 4], 2, lies downhill of 2.5
+    (2.9, None, 0.5),  # the middle of [0, 2.9], 1.45, lies downhill of 0.5
+    (4.0, 0.2, 0.5),
+    (4.0, -1.0, 0.5),  # clipped to the bracket's lower end 0, downhill of 0.5
+    (4.0, 1.6, 2.5),
+])
+def test_argmin_finds_the_minimum_downhill_of_its_start(upper, r0, minimum):
+    r_star, on_bound = argmin(_two_minima, jnp.asarray(0.0), 0.0, upper, r0=r0)
+    assert float(r_star) == pytest.approx(minimum, abs=1e-9) and not bool(on_bound)
+
+
+def test_argmin_default_tolerance_places_a_non_quadratic_minimum_to_1e_10():
+    # E^2 = cosh(r - theta): dE^2/dr = sinh(r - theta) is not linear, the minimum is theta.
+    r_star, _ = argmin(lambda r, th: jnp.cosh(r - th), jnp.asarray(1.234), 0.0, 3.0)
+    assert abs(float(r_star) - 1.234) <= 1e-10
+
+
+def test_argmin_r_takes_the_lower_end_s_dtype():
+    # A float64 upper end or start (numpy, strongly typed) does not promote a float32 problem.
+    r_star, _ = argmin(_two_minima, jnp.float32(0.0), jnp.float32(0.0), np.float64(4.0))
+    assert r_star.dtype == jnp.float32
+    r_star, _ = argmin(_two_minima, jnp.float32(0.0), jnp.float32(0.0), jnp.float32(4.0),
+                       r0=np.float64(1.0))
+    assert r_star.dtype == jnp.float32
