@@ -40,3 +40,10 @@ def test_argmin_r_takes_the_lower_end_s_dtype():
     r_star, _ = argmin(_two_minima, jnp.float32(0.0), jnp.float32(0.0), jnp.float32(4.0),
                        r0=np.float64(1.0))
     assert r_star.dtype == jnp.float32
+
+
+def test_argmin_max_steps_caps_the_root_find_without_raising():
+    # Three gradient evaluations from the middle of [0, 3] are not enough to place cosh's
+    # minimum 1.234 to 1e-6: the result is where the cap left it, not an error.
+    r_star, _ = argmin(lambda r, th: jnp.cosh(r - th), jnp.asarray(1.234), 0.0, 3.0, max_steps=3)
+    assert 1e-6 < abs(float(r_star) - 1.234) < 1.5
