@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.solve import argmin
+from diffsense.solve import argmin, argmin_derivative
 
 
 def _two_minima(r, theta):
@@ -47,3 +47,14 @@ def test_argmin_max_steps_caps_the_root_find_without_raising():
     # minimum 1.234 to 1e-6: the result is where the cap left it, not an error.
     r_star, _ = argmin(lambda r, th: jnp.cosh(r - th), jnp.asarray(1.234), 0.0, 3.0, max_steps=3)
     assert 1e-6 < abs(float(r_star) - 1.234) < 1.5
+
+
+def test_argmin_derivative_of_a_shallow_bowl_and_at_zero_curvature():
+    # E^2 = (r - theta)^2 / 4: curvature 1/2 (a strict minimum, however shallow), r* = theta,
+    # so dr*/dtheta = 1.
+    shallow = argmin_derivative(lambda r, th: 0.25 * (r - th) ** 2, jnp.asarray(0.7), jnp.asarray(0.7))
+    assert float(shallow) == pytest.approx(1.0, abs=1e-12)
+    # E^2 = theta r + r^4 at r = 0: curvature 12 r^2 = 0 with the cross term 1: no strict
+    # minimum, NaN (not -1/0).
+    flat = argmin_derivative(lambda r, th: th * r + r**4, jnp.asarray(0.0), jnp.asarray(1.0))
+    assert np.isnan(float(flat))
