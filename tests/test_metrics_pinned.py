@@ -1,14 +1,19 @@
-"""Boundaries of the cost model's input checks and the lone sensor's breakdown labels, each pinned
-by hand (these are the surviving mutants of the partial mutation run of diffsense/metrics/_cost.py,
-docs/mutation.md)."""
+"""Boundaries of the cost model's input checks and the lone sensor's breakdown labels, coverage
+parts, the objective's identity and sq_error's default temperature, each pinned by hand (these
+are surviving mutants of the partial mutation run of diffsense/metrics, docs/mutation.md)."""
 
 from __future__ import annotations
 
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
 import pytest
 
 from diffsense.errors import InputError
 from diffsense.metrics._cost import CostTerm, SensorCost, cost_breakdown, load_costs
+from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_classes, coverage_parts
 from diffsense.sensors import Radar
+from tests._toy_pipeline import toy_objective
 
 
 @pytest.mark.parametrize("coefficient", [0.0, 0.5])
@@ -45,3 +50,28 @@ def test_lone_sensor_breakdown_labels_carry_its_kind():
     assert parts["radar.base"] == pytest.approx(45.0)
     assert all(k.startswith("radar.") for k in parts)
     assert sum(parts.values()) == pytest.approx(85.0)
+
+
+def test_coverage_parts_of_hand_made_windows():
+    # Windows of three frames: seen throughout, seen once (partly), never seen.
+    windows = jnp.array([[1.0, 1.0, 1.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])
+    parts = coverage_parts(np.asarray(coverage_classes(windows)))
+    assert tuple(parts) == COVERAGE_PARTS == ("throughout", "partly", "never")
+    assert {k: v.tolist() for k, v in parts.items()} == {
+        "throughout": [True, False, False], "partly": [False, True, False],
+        "never": [False, False, True]}
+
+
+def test_objective_is_hashed_and_compared_by_identity():
+    # Two objectives built alike are different keys (arrays are not hashable by value).
+    a, b = toy_objective(n=1, instants=2), toy_objective(n=1, instants=2)
+    assert a == a and a != b and hash(a) != hash(b) and len({a: 0, b: 1}) == 2
+
+
+def test_sq_error_defaults_to_the_documented_temperature():
+    # With no tau, E^2 split by variant and step averages to E^2 at tau = 1 (the sensors'
+    # documented temperatures), as the objective's own default gives it.
+    obj = toy_objective(n=1, instants=2)
+    sq = eqx.filter_jit(lambda o: o.sq_error({"range_m": 40.0}))(obj)
+    e2_tau1 = eqx.filter_jit(lambda o: o.e2({"range_m": 40.0}, 1.0))(obj)
+    assert float(jnp.mean(sq)) == pytest.approx(float(e2_tau1), rel=1e-12)
