@@ -38,15 +38,11 @@ def _ref_grid(ev, r):
 def _margins(E, r_deg, draws, lam):
     """The smallest |logit p - logit u| over the reference's draws at r, and how many are below lam."""
     import equinox as eqx
-    import jax
     import jax.numpy as jnp
 
-    from diffsense.metrics._estimators import _clipped_logit
-    from diffsense.metrics._reference import reference_uniforms
+    from diffsense.metrics import reference_draw_margins
 
-    p = eqx.filter_jit(lambda o, x: o._sensor_detections(o.point(x), "hard").p_detect)(E, jnp.asarray(r_deg))
-    u = jax.vmap(lambda d: reference_uniforms(E.data.noise_key, d, p.shape[1:], p.dtype))(jnp.arange(draws))
-    m = np.abs(np.asarray(_clipped_logit(p)[None] - _clipped_logit(u)))
+    m = np.asarray(eqx.filter_jit(reference_draw_margins)(E, jnp.asarray(r_deg), draws))
     return float(m.min()), int(np.sum(m < lam))
 
 

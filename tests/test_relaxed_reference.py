@@ -163,3 +163,19 @@ def test_optimise_judges_the_answer_on_the_reference_and_reports_it(monkeypatch)
     assert out["E_hard_star"] == ev.e_hard(r_star)  # the median-threshold E, reported beside it
     assert names == ["E_ref"] and not any("E_hard" in n for n in out["notes"])
     assert "E_ref(r*) = " in summary_table(out)
+
+
+def test_draw_margins_say_when_the_relaxation_is_exact(relaxed):
+    # The relaxed draw sigmoid(m / lambda) is within sigmoid(-m_min / lambda) of its hard value, so
+    # at a temperature far below the smallest margin the estimate is E_ref; at one far above it,
+    # the nearest draw is blurred and the estimate moves.
+    from diffsense.metrics import reference_draw_margins
+
+    m = np.asarray(eqx.filter_jit(reference_draw_margins)(relaxed, jnp.asarray(8.0), 4))
+    assert m.shape[0] == 4 and m.ndim == 4 and np.all(np.isfinite(m)) and np.all(m >= 0)
+    ref = float(reference(relaxed, 8.0).e2)
+    lam = relaxed.estimator.reference_temperature
+    m_min = float(m.min())
+    assert m_min > 0
+    assert float(e2(relaxed, 8.0, 1e-3 * m_min / lam)) == pytest.approx(ref, rel=1e-9)
+    assert abs(float(e2(relaxed, 8.0, 1e3 * m_min / lam)) - ref) > 1e-6 * ref

@@ -90,3 +90,18 @@ def summarise(draws: Float[Array, " K"]) -> ReferenceEvaluation:
     e = jnp.where(positive, jnp.sqrt(jnp.where(positive, e2, 1.0)), 0.0)
     e_se = jnp.where(positive, e2_se / (2.0 * jnp.where(positive, e, 1.0)), 0.0)
     return ReferenceEvaluation(e2=e2, e2_se=e2_se, e=e, e_se=e_se, draws=draws)
+
+
+def reference_draw_margins(objective: Any, r: Any, draws: int) -> Float[Array, "K N T V"]:
+    """|logit p - logit u| of each of the first `draws` reference draws at r [logit units].
+
+    How far each (draw, variant, frame, vehicle) detection is from flipping: the relaxed
+    reference at temperature lambda differs from its hard draw by sigmoid(-margin / lambda), so the
+    smallest margins say which draws carry the relaxed estimator's gap to E_ref. `objective` is a
+    `diffsense.metrics.Objective`; r its parameters (a dict, or the value of a one-parameter problem).
+    """
+    from diffsense.metrics._estimators import _clipped_logit  # the same clipping as the relaxed draw
+
+    p = objective._sensor_detections(objective.point(r), "hard").p_detect
+    u = jax.vmap(lambda d: reference_uniforms(objective.data.noise_key, d, p.shape[1:], p.dtype))(jnp.arange(draws))
+    return jnp.abs(_clipped_logit(p)[None] - _clipped_logit(u))
