@@ -133,15 +133,14 @@ def run_gradient(E, cost_fn, bounds, lam, budget, c, seed):
     config = BoxConfig(samples=samples, starts=starts, tau_schedule=LEVELS, max_soft=soft, max_steps=MAX_STEPS,
                        cost_weight=lam, seed=seed)
     result = box_solve(fns, dict(zip(E.names, map(tuple, bounds))), config)
-    spent, trace = 0.0, []
+    spent, trace, best = 0.0, [], (math.inf, None)
     for e in result.history:
         spent += c if e.kind == "soft" else 1.0
         if e.kind == "hard":
             trace.append((spent, e.value + lam * cost_fn(e.x)[0]))
-    x_best = min(((e.value + lam * cost_fn(e.x)[0], e.x) for e in result.history if e.kind == "hard"),
-                 key=lambda t: t[0])[1]
+            best = min(best, (trace[-1][1], e.x), key=lambda t: t[0])
     return trace, {"x_star": result.x_star, "on_bound": result.on_bound, "counts": result.counts,
-                   "x_best": [float(v) for v in np.asarray(x_best)]}
+                   "x_best": [float(v) for v in best[1]]}
 
 
 def _hard_j(E, cost_fn, lam, lo, width):

@@ -26,6 +26,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from diffsense.metrics._estimators import _clipped_logit  # the relaxed draw's clipping
+
 # Folded into each variant's noise key to give the reference's uniforms their own stream.
 _REFERENCE_STREAM = 0x13
 
@@ -100,8 +102,6 @@ def reference_draw_margins(objective: Any, r: Any, draws: int) -> Float[Array, "
     smallest margins say which draws carry the relaxed estimator's gap to E_ref. `objective` is a
     `diffsense.metrics.Objective`; r its parameters (a dict, or the value of a one-parameter problem).
     """
-    from diffsense.metrics._estimators import _clipped_logit  # the same clipping as the relaxed draw
-
     p = objective._sensor_detections(objective.point(r), "hard").p_detect
     u = jax.vmap(lambda d: reference_uniforms(objective.data.noise_key, d, p.shape[1:], p.dtype))(jnp.arange(draws))
     return jnp.abs(_clipped_logit(p)[None] - _clipped_logit(u))
