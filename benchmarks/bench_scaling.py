@@ -42,6 +42,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RATIO_TARGET = 2.5  # issue #14: one value-and-gradient evaluation <= 2.5x one value evaluation
 LOAD_WARNING = 1.5
+MAX_SCENARIOS = 6  # the paper's six (diffsense.metrics.PAPER_SCENARIOS), taken in order
 COLUMNS = ("devices", "variants", "scenarios", "scenes", "build [s]", "compile value / v+g [s]", "value [s]",
            "value+grad [s]", "ratio", "v+g per scene [ms]", "peak RSS [MB]")
 
@@ -182,7 +183,11 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main() -> None:
-    args = _parser().parse_args()
+    parser = _parser()
+    args = parser.parse_args()
+    counts = [args.base_scenarios, *_ints(args.scenarios)]
+    if not all(1 <= s <= MAX_SCENARIOS for s in counts):
+        parser.error(f"scenario counts must lie in 1..{MAX_SCENARIOS}, got {counts}")
     if args.worker:
         print(json.dumps(worker(args)))
         return
