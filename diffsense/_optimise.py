@@ -33,7 +33,7 @@ from diffsense.metrics import (
     recorded_scenes,
     speed_shifted_scenes,
 )
-from diffsense.predictors import load_predictor
+from diffsense.predictors import CastPredictor, CSLSTMPredictor, load_predictor, with_compute_dtype
 from diffsense.sensors import Weather
 from diffsense.sensors._mount import relevance_stand_ins
 from diffsense.scene import ROLE_NAMES
@@ -57,6 +57,15 @@ def _predictor(problem: Problem):
     return problem.predictor
 
 
+def _in_dtype(predictor: Any, predictor_dtype: str, dtype) -> Any:
+    """The predictor computing in `predictor_dtype` ("auto": the CS-LSTM in float32, the precision
+    of its weights; any other predictor in E's own `dtype`)."""
+    if predictor_dtype == "auto":
+        inner = predictor.inner if isinstance(predictor, CastPredictor) else predictor
+        predictor_dtype = "float32" if isinstance(inner, CSLSTMPredictor) else jnp.dtype(dtype).name
+    return with_compute_dtype(predictor, predictor_dtype) if predictor_dtype != jnp.dtype(dtype).name else predictor
+
+
 def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     """E(r) of `problem`: the scenarios simulated, the sensor and predictor loaded, every random
     draw fixed by `problem.seed`. `predictor` (optional) replaces `problem.predictor` (an
@@ -64,6 +73,7 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     dtype = _precision(problem.float64)
     sensor = problem.make_sensor()
     predictor = _predictor(problem) if predictor is None else predictor
+    predictor = _in_dtype(predictor, problem.predictor_dtype, dtype)
     noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))[1]  # [0] is the scenes' (traffic_scenes)
     if problem.scenes is not None:
         scenes, index, names, weather = recorded_scenes(

@@ -17,7 +17,7 @@ from typing import Any
 from diffsense import config as cfgio
 from diffsense.errors import InputError
 from diffsense.metrics import PAPER_SCENARIOS, QUESTIONS, EstimatorConfig
-from diffsense.predictors import Predictor
+from diffsense.predictors import COMPUTE_DTYPES, Predictor
 from diffsense.sensors import Sensor, make_sensor
 from diffsense.sensors._params import ParamSpec
 from diffsense.solve import BoxConfig, SolveConfig
@@ -55,6 +55,11 @@ class Problem:
         prediction_stride_frames: one prediction instant every this many scene frames [-].
         background_vehicles: if > 0, replaces every scenario's count of far background vehicles.
         float64: compute E(r) in float64 (enables JAX's x64 mode when needed).
+        predictor_dtype: the float type the predictor computes in: "float32", "float64", or
+            "auto" (the default): float32 for the CS-LSTM, whose weights are float32 and which
+            costs half as much in float32 on a CPU; E's own type for any other predictor. Its
+            inputs and output stay in E's type, so E and dE/dr keep float64 around it
+            (`diffsense.predictors.with_compute_dtype`).
         weather: the scenes' weather, {"rain_mm_h": R, "fog_visibility_m": V} (either may be left
             out: no rain, no fog), for every scenario; None: each scenario's own (its TOML's
             `[weather]`, clear for the shipped ones).
@@ -87,6 +92,7 @@ class Problem:
     prediction_stride_frames: int = 4
     background_vehicles: int = 0
     float64: bool = True
+    predictor_dtype: str = "auto"
     weather: Mapping[str, float] | None = None
     traffic_speed_offset_kmh: float = 0.0
     objective: str = "eq12"
@@ -125,6 +131,10 @@ class Problem:
         _check_int("background_vehicles", self.background_vehicles, 0, 10_000)
         _check_int("extra_curve_points", self.extra_curve_points, 0, 1000)
         set_("weather", None if self.weather is None else _weather(self.weather))
+        if self.predictor_dtype not in ("auto", *COMPUTE_DTYPES):
+            raise InputError(f"predictor_dtype must be auto, {' or '.join(COMPUTE_DTYPES)}, got {self.predictor_dtype!r}")
+        if self.predictor_dtype == "float64" and not self.float64:
+            raise InputError("predictor_dtype float64 needs float64 = true (a float32 E cannot carry its digits)")
         if self.profile == "paper" and self.weather is not None and self.weather != _weather(None):
             raise InputError("the paper profile is the paper's clear-weather design: use the physical profile for weather")
         if self.scenes is not None:
@@ -292,6 +302,7 @@ class ProblemSection:
     prediction_stride_frames: int = 4
     background_vehicles: int = 0
     float64: bool = True
+    predictor_dtype: str = "auto"
     objective: str = "eq12"
     miss_penalty_m2: float = 100.0
 
@@ -332,4 +343,4 @@ def problem_fields(settings: Settings, sensor: str | None = None, param: str | N
                 seed=p.seed, predictor=p.model, fill=p.fill or None, estimator=p.estimator,
                 profile=p.profile, sensor_config=p.sensor_config or None,
                 prediction_stride_frames=p.prediction_stride_frames, background_vehicles=p.background_vehicles,
-                float64=p.float64, objective=p.objective, miss_penalty_m2=p.miss_penalty_m2, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)
+                float64=p.float64, predictor_dtype=p.predictor_dtype, objective=p.objective, miss_penalty_m2=p.miss_penalty_m2, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)

@@ -47,7 +47,7 @@ def random_cslstm():
 def radar(random_cslstm):
     problem = ds.Problem(sensor="radar", params={"hfov_deg": (30.0, 180.0), "range_m": (30.0, 200.0)},
                          scenarios=["sc01"], variants=2, seed=0, predictor=random_cslstm,
-                         prediction_stride_frames=20)
+                         prediction_stride_frames=20, predictor_dtype="float64")  # float64 throughout for FD
     return ds.objective(problem)
 
 
@@ -98,7 +98,7 @@ def test_dict_gradient_equals_central_differences_radar(radar):
 
 def test_dict_gradient_equals_central_differences_camera(random_cslstm):
     problem = ds.Problem(sensor="camera", params={"hfov_deg": (30.0, 180.0)}, scenarios=["sc01"], variants=2,
-                         predictor=random_cslstm, prediction_stride_frames=20)
+                         predictor=random_cslstm, prediction_stride_frames=20, predictor_dtype="float64")
     E = ds.objective(problem)
     r = {"hfov_deg": 70.0}
     grad = jax.grad(lambda r: E(r, tau=2.0))(r)

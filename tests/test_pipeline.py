@@ -23,7 +23,7 @@ def predictor() -> CSLSTMPredictor:
 
 def _problem(predictor, sensor, param, scenarios=("sc05",)):
     problem = ds.Problem(sensor=sensor, params={param: (1.0, 300.0)}, scenarios=scenarios, variants=2,
-                         prediction_stride_frames=20, float64=True, predictor=predictor)
+                         prediction_stride_frames=20, float64=True, predictor_dtype="float64", predictor=predictor)
     return Evaluator(ds.objective(problem))
 
 

@@ -59,6 +59,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="the sensors' shipped constants: physical (default) or paper (the paper's design)")
     p.add_argument("--sensor-config", metavar="FILE", help="TOML of sensor constants (any subset) replacing the profile's")
     p.add_argument("--fill", choices=("zero", "hold", "interp"), help="missing-detection policy (default: the profile's)")
+    p.add_argument("--predictor-dtype", choices=("auto", "float32", "float64"),
+                   help="the predictor's arithmetic inside the float64 E(r) (default auto: the CS-LSTM in float32, "
+                        "its weights' own precision, at half the cost; docs: speed and accuracy)")
     p.add_argument("--estimator", choices=("auto", "mean-field", "mc", "relaxed-reference", "hard"),
                    help="how detection uncertainty enters (auto: relaxed-reference under a probabilistic detection law, "
                         "mean-field under the threshold law; docs: detection)")
@@ -166,7 +169,7 @@ def problems(args: argparse.Namespace) -> list:
         if args.scenes is not None:
             fields["scenes"] = args.scenes
         for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed"),
-                          ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"),
+                          ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"), ("predictor_dtype", "predictor_dtype"),
                           ("profile", "profile"), ("sensor_config", "sensor_config"),
                           ("traffic_speed_offset_kmh", "traffic_speed_offset_kmh")):
             if getattr(args, flag) is not None:

@@ -6,7 +6,8 @@ The shipped implementation is the CS-LSTM (Deo & Trivedi 2018) in Flax NNX, SI a
 
 Entry points: `load_predictor` (shipped weights, a project `.msgpack`, or a published PyTorch
 checkpoint read without torch), `predict_mean` (compact neighbours) and `predict_mean_dense`
-(the 39-slot grid), both pure and jit/grad-able. `si_to_model` / `model_to_si` are the only unit
+(the 39-slot grid), both pure and jit/grad-able; `with_compute_dtype` runs any predictor at its
+own float precision inside an objective of another (float32 inside a float64 E(r)). `si_to_model` / `model_to_si` are the only unit
 and axis conversion. CLI: `python -m diffsense.predictors {parity,card}`.
 """
 
@@ -19,6 +20,7 @@ from diffsense.predictors._api import (
     predict_model_frame,
     select_mean,
 )
+from diffsense.predictors._cast import COMPUTE_DTYPES, CastPredictor, with_compute_dtype
 from diffsense.predictors._protocol import CSLSTM_SPEC, InputSpec, Predictor, PredictorInputs
 from diffsense.predictors._checkpoint import read_state_dict
 from diffsense.predictors._convert import model_from_state_dict, state_dict_from_model
@@ -35,6 +37,8 @@ from diffsense.predictors._parity import reference_forward, reference_to_compact
 from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights, read_card, save_weights
 
 __all__ = [
+    "COMPUTE_DTYPES",
+    "CastPredictor",
     "CSLSTM_SPEC",
     "InputSpec",
     "Predictor",
@@ -64,4 +68,5 @@ __all__ = [
     "select_mean",
     "si_to_model",
     "state_dict_from_model",
+    "with_compute_dtype",
 ]

@@ -1,0 +1,112 @@
+"""The predictor computing in float32 inside a float64 E(r) (`Problem.predictor_dtype`).
+
+The cast must not change what E means: E and dE/dr with a float32 CS-LSTM agree with the
+all-float64 objective's value and with central finite differences of it, to float32's rounding;
+the output and E stay float64; the choice is checked at the door.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffsense as ds
+from diffsense.errors import InputError
+from diffsense.predictors import CastPredictor, PredictorInputs, init_predictor, predict_mean, with_compute_dtype
+
+
+def _inputs(dtype, b=6, m=3, seed=0):
+    rng = np.random.default_rng(seed)
+    hist = np.stack([25 * 0.2 * np.arange(-15, 1)[None].repeat(b, 0), rng.normal(0, 0.3, (b, 16))], -1)
+    nbr = hist[:, None] + rng.normal(0, 10, (b, m, 1, 2))
+    slot = np.stack([rng.choice(39, m, replace=False) for _ in range(b)]).astype(np.int32)
+    return PredictorInputs(hist=jnp.asarray(hist, dtype), nbr_hist=jnp.asarray(nbr, dtype),
+                           nbr_slot=jnp.asarray(slot), nbr_weight=jnp.asarray(rng.uniform(0.2, 1, (b, m)), dtype))
+
+
+def test_cast_runs_the_inner_predictor_in_float32_and_returns_float64():
+    inner = init_predictor(seed=1)
+    cast = with_compute_dtype(inner, "float32")
+    x64_in = _inputs(jnp.float64)
+    out = jax.jit(lambda p, x: p(x))(cast, x64_in)  # the predictor is an argument: a pytree
+    assert out.dtype == jnp.float64
+    # Computed in float32: every output is a float32 number, and it is the float32 prediction.
+    np.testing.assert_array_equal(np.asarray(out), np.asarray(out).astype(np.float32).astype(np.float64))
+    x32_in = jax.tree.map(lambda a: a.astype(jnp.float32) if a.dtype == jnp.float64 else a, x64_in)
+    want = jax.jit(lambda p, x: p(x))(inner, x32_in)
+    np.testing.assert_allclose(np.asarray(out), np.asarray(want, np.float64), rtol=2e-6, atol=1e-7)
+    # ... while float64 inside gives float64 numbers, near them.
+    full = np.asarray(jax.jit(lambda p, x: p(x))(inner, x64_in))
+    assert np.any(full != full.astype(np.float32).astype(np.float64))
+    assert np.max(np.abs(full - np.asarray(out))) < 1e-5
+
+
+def test_cast_is_one_level_deep_and_keeps_the_spec():
+    inner = init_predictor(seed=1)
+    twice = with_compute_dtype(with_compute_dtype(inner, "float32"), "float64")
+    assert isinstance(twice, CastPredictor) and twice.inner is inner and twice.dtype == "float64"
+    assert twice.spec == inner.spec and with_compute_dtype(inner, None) is inner
+    with pytest.raises(ValueError, match="float16"):
+        with_compute_dtype(inner, "float16")
+
+
+@pytest.fixture(scope="module")
+def objectives():
+    # The shipped weights: a random network predicts near-constant futures, and E would be flat.
+    predictor = ds.predictors.load_predictor()
+    kw = dict(sensor="radar", params={"hfov_deg": (30.0, 180.0)}, scenarios=["sc03"], variants=2, seed=0,
+              predictor=predictor, prediction_stride_frames=20)
+    return ds.objective(ds.Problem(**kw)), ds.objective(ds.Problem(**kw, predictor_dtype="float64"))
+
+
+def test_problem_default_computes_the_predictor_in_float32(objectives):
+    e32, e64 = objectives
+    assert isinstance(e32.predictor, CastPredictor) and e32.predictor.dtype == "float32"
+    assert not isinstance(e64.predictor, CastPredictor)
+    assert e32.dtype == e64.dtype == jnp.float64
+
+
+@pytest.mark.parametrize("hfov", [32.0, 50.0, 120.0])
+def test_float32_predictor_value_and_gradient_match_float64_finite_differences(objectives, hfov):
+    e32, e64 = objectives
+    vg = eqx.filter_jit(lambda E, r: jax.value_and_grad(lambda x: E({"hfov_deg": x}))(r))
+    value = eqx.filter_jit(lambda E, r: E({"hfov_deg": r}))
+    v32, g32 = vg(e32, jnp.asarray(hfov))
+    v64, g64 = vg(e64, jnp.asarray(hfov))
+    assert v32.dtype == jnp.float64 and g32.dtype == jnp.float64
+    h = 1e-3
+    fd = (float(value(e64, jnp.asarray(hfov + h))) - float(value(e64, jnp.asarray(hfov - h)))) / (2 * h)
+    assert float(v32) == pytest.approx(float(v64), rel=1e-6)
+    assert abs(float(g64)) > 0.1  # a slope worth comparing
+    assert float(g64) == pytest.approx(fd, rel=1e-5)
+    assert float(g32) == pytest.approx(fd, rel=1e-4)
+
+
+def test_predictor_dtype_is_checked_at_the_door():
+    with pytest.raises(InputError, match="predictor_dtype must be auto, float32 or float64"):
+        ds.Problem(predictor_dtype="float16")
+    with pytest.raises(InputError, match="needs float64"):
+        ds.Problem(float64=False, predictor_dtype="float64")
+    assert ds.Problem().predictor_dtype == ds.Problem.from_toml().predictor_dtype == "auto"
+
+
+def test_auto_casts_the_cslstm_only():
+    """A user's predictor keeps E's precision under "auto" (it may not be a float32 network);
+    "float32" asked for casts it too."""
+
+    class Persistence(eqx.Module):  # the target stays where it is
+        spec = ds.predictors.CSLSTM_SPEC
+
+        def __call__(self, inputs):
+            return jnp.repeat(inputs.hist[:, -1:], self.spec.future_points, axis=1)
+
+    kw = dict(sensor="radar", params={"hfov_deg": (30.0, 180.0)}, scenarios=["sc03"], variants=1,
+              prediction_stride_frames=40)
+    assert isinstance(ds.objective(ds.Problem(**kw, predictor=Persistence())).predictor, Persistence)
+    cast = ds.objective(ds.Problem(**kw, predictor=Persistence(), predictor_dtype="float32")).predictor
+    assert isinstance(cast, CastPredictor) and isinstance(cast.inner, Persistence)
+    single = ds.objective(ds.Problem(**kw, float64=False)).predictor  # float32 E: nothing to cast
+    assert not isinstance(single, CastPredictor)
