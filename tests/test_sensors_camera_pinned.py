@@ -9,11 +9,11 @@ its image is k * 2 atan(0.9 / R) px wide.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 import pytest
+from _sensor_temperature import assert_temperature_scales_the_config
 from test_sensor_scenes import make_scene
 
 from diffsense import config as cfg
@@ -85,12 +85,6 @@ def test_visible_gate_at_temperature_2_by_hand():
     assert p == pytest.approx(_sigmoid(4.0) * _sigmoid(50 / 3.6) * _sigmoid(15.0), rel=1e-9)
 
 
-def _scaled(config, factor):
-    t = config.temperature
-    return cfg.replace(config, temperature=dataclasses.replace(
-        t, **{f.name: getattr(t, f.name) * factor for f in dataclasses.fields(t)}))
-
-
 def _occluded():
     """Ego; an occluder 38 m ahead of the camera, 1.6 m to the left; a car 40 m ahead: the
     occluder is two near-temperatures nearer and covers part of the car."""
@@ -99,15 +93,9 @@ def _occluded():
 
 @pytest.mark.parametrize("temperature", [2.0, 0.5])
 def test_temperature_multiplies_every_soft_temperature_occlusion_included(temperature):
-    scene = _occluded()
-    got = _terms(CAMERA, scene, temperature)[0]
-    want = _terms(_scaled(CAMERA, temperature), scene)[0]
-    for (m_got, t_got), (m_want, t_want) in zip(got, want):
-        np.testing.assert_allclose(np.asarray(m_got), np.asarray(m_want), rtol=1e-12, atol=1e-12)
-        assert float(t_got) == pytest.approx(float(t_want), rel=1e-12)
-    # The visible-fraction margin carries the soft occlusion, and moves with its temperatures.
-    visible = {f: float(_terms(_scaled(CAMERA, f), scene)[0][3][0][2, 0]) for f in (2.0, 0.5)}
-    assert abs(visible[2.0] - visible[0.5]) > 0.01, visible
+    # gate 3 carries the soft occlusion; it moves by > 0.01 between temperatures 2 and 1/2
+    assert_temperature_scales_the_config(_camera_terms, CAMERA, _occluded(), temperature, gate=3, vehicle=2,
+                                         least=0.01)
 
 
 # --- the confidence law: the hidden part removes evidence -----------------------------------

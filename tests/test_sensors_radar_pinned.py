@@ -9,12 +9,12 @@ temperature of the config multiplied by T, occlusion's included.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import jax
 import numpy as np
 import pytest
+from _sensor_temperature import assert_temperature_scales_the_config
 from test_sensor_scenes import make_scene
 
 from diffsense import config as cfg
@@ -69,12 +69,6 @@ def test_soft_p_at_temperature_2_by_hand():
         assert np.max(np.abs(wrong - p)) > 1e-3
 
 
-def _scaled(config, factor):
-    t = config.temperature
-    return cfg.replace(config, temperature=dataclasses.replace(
-        t, **{f.name: getattr(t, f.name) * factor for f in dataclasses.fields(t)}))
-
-
 def _occluded():
     """Ego; an occluder 38 m ahead of the radar, 1.6 m to the left; a car 40 m ahead: the
     occluder is 2 m (two near-temperatures at T = 1) nearer and covers part of the car, its
@@ -84,16 +78,9 @@ def _occluded():
 
 @pytest.mark.parametrize("temperature", [2.0, 0.5])
 def test_temperature_multiplies_every_soft_temperature_occlusion_included(temperature):
-    scene = _occluded()
-    got = _terms(RADAR, scene, temperature)[0]
-    want = _terms(_scaled(RADAR, temperature), scene)[0]
-    for (m_got, t_got), (m_want, t_want) in zip(got, want):
-        np.testing.assert_allclose(np.asarray(m_got), np.asarray(m_want), rtol=1e-12, atol=1e-12)
-        assert float(t_got) == pytest.approx(float(t_want), rel=1e-12)
-    # The SNR margin carries the soft occlusion: it moves with its temperatures (by > 0.1 dB
-    # between T = 2 and 1/2), so the comparison above can fail.
-    snr_margin = {f: float(_terms(_scaled(RADAR, f), scene)[0][2][0][2, 0]) for f in (2.0, 0.5)}
-    assert abs(snr_margin[2.0] - snr_margin[0.5]) > 0.1, snr_margin
+    # gate 2 carries the soft occlusion; it moves by > 0.1 between temperatures 2 and 1/2
+    assert_temperature_scales_the_config(_radar_terms, RADAR, _occluded(), temperature, gate=2, vehicle=2,
+                                         least=0.1)
 
 
 # --- the SNR clip of the thermal noise term -------------------------------------------------
