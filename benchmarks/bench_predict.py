@@ -19,6 +19,12 @@ a shuffled order, after a short pause (--pause-ms) so that neither library's idl
 are still spinning when the other one starts; all calls see the same background load. The JAX
 compile time of each row is reported apart, and the load average before and after the run.
 torch is optional (never a runtime dependency; the `bench` extra): without it only JAX is timed.
+
+Then the roofline (`_roofline.py`): the forward pass's GFLOP, the rate each library reaches on
+it, and the float32 matmul rates of the network's own shapes on this machine, so a target such as
+"3x PyTorch" can be checked against what the machine can do at all: a forward pass takes at
+least GFLOP / (best matmul rate), an input gradient at least twice that (one backward product
+per forward product).
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _roofline import forward_gflop, matmul_rates, matmul_shapes
 
 from diffsense.predictors import (
     init_predictor,
@@ -129,6 +136,7 @@ def main() -> None:
           f"({os.cpu_count()} cores); median of {args.repeats} interleaved rounds; "
           f"jax {jax.__version__}, torch {torch_version}")
     print(f"{'variant':<10} {'op':<15} {'jax [ms]':>9} {'torch [ms]':>11} {'speed-up':>9} {'jax compile [s]':>16}")
+    rows = []
     for predictor in predictors:
         name = "manoeuvre" if predictor.maneuvers else "single"
         fns, compile_s = _jax_fns(predictor, inputs)
@@ -139,6 +147,7 @@ def main() -> None:
             tfns, agree = torch_fns(state_dict_from_model(predictor.model()), inputs, ref)
             timed |= {f"torch_{k}": v for k, v in tfns.items()}
         t = _time_interleaved(timed, args.repeats, args.pause_ms / 1e3)
+        rows.append((name, t))
         for op, label in OPS.items():
             if f"jax_{op}" not in t:
                 continue
@@ -148,12 +157,34 @@ def main() -> None:
             print(f"{name:<10} {label:<15} {1e3 * t_jax:9.1f} {torch_txt} {speedup} {compile_s[op]:16.1f}")
         if agree is not None:
             print(f"{'':<10} (torch vs jax predicted mean: max |diff| = {agree:.2e} m)")
+    _print_roofline(args.batch, args.neighbours, rows, torch if torch_version else None)
     load1 = os.getloadavg()
     print(f"load average (1, 5, 15 min): before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, "
           f"after {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
     if max(load0[0], load1[0]) > 0.5 * (os.cpu_count() or 1):
         print("warning: the machine was busy. PyTorch's OpenMP workers slow down far more than XLA's "
               "under contention, so the speed-ups above overstate a quiet machine's.")
+
+
+def _print_roofline(batch: int, neighbours: int, rows, torch) -> None:
+    rates = matmul_rates(batch, neighbours, torch=torch)
+    print("\nroofline: float32 matmul rates on this machine (best of 30) [GFLOP/s]")
+    print(f"{'shape':<13} {'m x k x n':>18} {'xla':>7} {'torch':>7}")
+    for shape, (m, k, n) in matmul_shapes(batch, neighbours).items():
+        r = rates[shape]
+        torch_txt = f"{r['torch']:7.0f}" if "torch" in r else f"{'-':>7}"
+        print(f"{shape:<13} {f'{m} x {k} x {n}':>18} {r['xla']:7.0f} {torch_txt}")
+    best = max(v for r in rates.values() for v in r.values())
+    for name, t in rows:
+        gflop = forward_gflop(batch, neighbours)
+        line = f"{name}: forward {gflop:.2f} GFLOP, jax {gflop / t['jax_forward']:.0f} GFLOP/s"
+        if "torch_forward" in t:
+            modes = 6 if name == "manoeuvre" else 1  # the reference decodes every manoeuvre
+            t_torch = t["torch_forward"]
+            line += (f", torch {forward_gflop(batch, neighbours, modes) / t_torch:.0f} GFLOP/s; 3x torch = "
+                     f"{1e3 * t_torch / 3:.1f} ms needs {gflop / (t_torch / 3):.0f} GFLOP/s forward and "
+                     f"{2 * gflop / (t['torch_gradient'] / 3):.0f} GFLOP/s at the least for the input gradient")
+        print(line + f" (best matmul rate measured: {best:.0f} GFLOP/s)")
 
 
 if __name__ == "__main__":
