@@ -130,10 +130,10 @@ def test_float64_outer_solve_needs_x64_and_float32_does_not():
     assert abs(res.r_star - 1.3) <= SolveConfig().xtol_rel * (HI - LO)
 
 
-def test_float32_secant_stays_in_float32():
-    # Every point the secant's levels land on is a float32 number (float64 arithmetic would
-    # leave the float32 grid), and the answer is the bowl's centre to the tolerance. (The
-    # bisection's walk steps in Python floats: its levels may end between float32 numbers.)
+@pytest.mark.parametrize("method", ["secant", "bisection"])
+def test_float32_solve_stays_in_float32(method):
+    # Every point either method's levels land on is a float32 number (float64 arithmetic would
+    # leave the float32 grid), and the answer is the bowl's centre to the tolerance.
     e2, e_hard = bowl(1.3)
     dtypes = set()  # of every r and tau the objectives are given, in the sweep too
 
@@ -145,7 +145,7 @@ def test_float32_secant_stays_in_float32():
         dtypes.add(jnp.asarray(r).dtype)
         return e_hard(r)
 
-    res = solve(e2_seen, e_hard_seen, (LO, HI), config=SolveConfig(dtype="float32"))
+    res = solve(e2_seen, e_hard_seen, (LO, HI), config=SolveConfig(dtype="float32", method=method))
     assert dtypes == {jnp.dtype("float32")}
     for level in res.levels:
         assert float(np.float32(level.r)) == level.r, level
@@ -248,33 +248,37 @@ def test_a_soft_optimum_tying_the_best_step_on_e_hard_is_kept_without_a_note():
     assert hard_calls[len(res.sweep):] == [res.r_star]
 
 
-def test_a_level_overspending_its_share_stops_the_continuation_with_notes():
+def test_bisection_gradient_nan_inside_its_bracket_is_an_error():
     # Two levels (tol 1/64, then 1/128). The first walks from 0.5 by 1/64, 3/64, 7/64 to the
     # bracket [0.546875, 0.609375] around the minimum 0.6, inside which dE^2/dr is NaN: the
-    # halving cannot meet its |g| test and runs on until its midpoint reaches the lower end
-    # (about 50 evaluations), past the budget of 12. The second level is not started and the
-    # excess is noted.
+    # first halving point 0.578125 is an error, not an answer (it used to run on to the
+    # bracket's end and report the level converged).
     e2 = _bowl_with_nan_gradient(0.6, lambda r: (r > 0.546875) & (r < 0.609375))
     cfg = dataclasses.replace(WALK, tau_schedule=(2.0, 1.0))
-    res = solve(e2, bowl(0.5)[1], (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
-    assert len(res.levels) == 1 and res.levels[0].gradient_evaluations > 12
-    total = res.evaluations["objective"] + res.evaluations["gradient"]
-    assert res.notes[0] == "budget spent before tau=1: continuation stopped early"
-    assert f"{total} evaluations exceed the budget of 12" in res.notes
+    with pytest.raises(FloatingPointError, match=r"not finite in \[0.546875, 0.609375\] \(tau=2.0\)"):
+        solve(e2, bowl(0.5)[1], (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
 
 
-def test_a_later_level_left_one_evaluation_still_runs():
-    # As above, but dE^2/dr is NaN only at the first level's third halving point 0.6015625 and
-    # at the 0.59765625 that follows: two extra halvings (0.59765625, 0.595703125), 7 + 2 = 9
-    # gradient evaluations ending at the midpoint of [0.595703125, 0.59765625], leave the second
-    # level 12 - 9 - 2 = 1: it evaluates g at its start and stops there, not converged.
-    e2 = _bowl_with_nan_gradient(0.6, lambda r: (r == 0.6015625) | (r == 0.59765625))
+def test_bisection_gradient_nan_at_one_halving_point_is_an_error():
+    # As above, but dE^2/dr is NaN only at the third halving point 0.6015625: the halvings
+    # 0.578125 and 0.59375 (g < 0) narrow the bracket to [0.59375, 0.609375] first.
+    e2 = _bowl_with_nan_gradient(0.6, lambda r: r == 0.6015625)
     cfg = dataclasses.replace(WALK, tau_schedule=(2.0, 1.0))
-    res = solve(e2, bowl(0.5)[1], (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
-    first, second = res.levels
-    assert (first.r, first.gradient_evaluations) == (0.5966796875, 9)
-    assert (second.r, second.gradient_evaluations, second.converged) == (0.5966796875, 1, False)
-    assert "tau=1: stopped after 1 gradient evaluations (budget share)" in res.notes
+    with pytest.raises(FloatingPointError, match=r"not finite in \[0.59375, 0.609375\]"):
+        solve(e2, bowl(0.5)[1], (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
+
+
+@pytest.mark.parametrize("method", ["secant", "bisection"])
+@pytest.mark.parametrize("center", [0.004, 0.3, 0.6, 0.999])
+def test_no_level_spends_more_than_its_share(method, center):
+    # The budget of 12 less the sweep's hard answer and the polish: each level stops at its
+    # share, and the whole solve within the budget, wherever the minimum lies.
+    e2, e_hard = bowl(center)
+    cfg = dataclasses.replace(WALK, method=method, tau_schedule=(4.0, 2.0, 1.0))
+    res = solve(e2, e_hard, (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=cfg)
+    total = res.evaluations["objective"] + res.evaluations["gradient"]
+    assert total <= cfg.max_evaluations and not any("exceed the budget" in n for n in res.notes)
+    assert len(res.levels) == 3
 
 
 def test_result_reports_its_schedule_interval_and_wall_times():

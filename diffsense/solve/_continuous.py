@@ -3,7 +3,7 @@
 Strategy:
 1. the sweep's best step on the HARD objective gives a bracket: its neighbouring steps;
 2. inside the bracket, the minimum of the SOFT objective E^2(r, tau) is found as the root of
-   dE^2/dr with optimistix (`BracketedSecant`, or `optx.Bisection`), for each temperature of a
+   dE^2/dr (the optimistix solver `BracketedSecant`, or bisection), for each temperature of a
    continuation schedule, largest first, each level warm-started from the one before;
 3. the final answer is chosen by the HARD objective: the soft optimum is kept when it is at
    least as good as the best step, otherwise the other candidates (earlier levels' optima, the
@@ -30,7 +30,7 @@ from typing import Any, Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
+import numpy as np
 
 from diffsense.errors import InputError
 from diffsense.solve._bracketed import BracketedSecant
@@ -61,8 +61,8 @@ class SolveConfig:
         max_evaluations: budget of the continuous solve: objective (soft and hard) plus
             gradient evaluations (20 by default).
         dtype: float type of the outer problem (r, tau).
-        method: `secant` (BracketedSecant, warm-started) or `bisection` (optx.Bisection on
-            the whole bracket at every level).
+        method: `secant` (BracketedSecant, warm-started) or `bisection` (a downhill walk from
+            the previous level's answer to a sign change, then halving).
         hard_polish: most hard evaluations of the final compass search around r* (0: none);
             it only uses what the budget has left after the soft levels.
         reserve_polish: the soft levels leave `hard_polish` evaluations of the budget unspent, so
@@ -196,6 +196,10 @@ class _Counted:
     def as_r(self, r: float) -> jax.Array:
         return jnp.asarray(r, self.dtype)
 
+    def on_grid(self, r: float) -> float:
+        """r rounded to the nearest number of the solve's dtype (float32 solves stay float32)."""
+        return float(np.asarray(r, np.dtype(self.dtype)))
+
     def e2(self, r: float, tau: float) -> float:
         self.objective += 1
         return float(self._e2(self.as_r(r), self.as_r(tau)))
@@ -207,16 +211,6 @@ class _Counted:
     def grad(self, r: float, tau: float) -> float:
         self.gradient += 1
         return float(self._grad(self.as_r(r), self.as_r(tau)))
-
-
-class _Gradient(eqx.Module):
-    """dE^2/dr as a module: equal objectives give equal modules, so a second solve of the same
-    objective reuses the compiled root find instead of compiling it again."""
-
-    e2_soft: Callable[[Any, Any], Any]
-
-    def __call__(self, r, tau):
-        return jax.grad(self.e2_soft)(r, tau)
 
 
 _SECANT = BracketedSecant(rtol=0.0, atol=0.0)
@@ -244,8 +238,7 @@ def _level_secant(counted, y0, tau, lower, upper, probe, tol, max_steps, budget)
         upper=counted.as_r(upper),
         probe=counted.as_r(probe),
         xtol=counted.as_r(tol),
-        max_evaluations=jnp.asarray(max_steps, jnp.int32),
-    )
+    )  # the Python loop below ends a level at its share: no max_evaluations option to read
     y = counted.as_r(y0)
     state = _secant_init(y, options)
     n = 0
@@ -279,19 +272,6 @@ def _hard_polish(counted, r, e_hard, lower, upper, probes, min_step):
     return r, e_hard
 
 
-class _Squashed(eqx.Module):
-    """dE^2/dr squashed into (-atol/2, atol/2), its sign kept: optx.Bisection reads only the
-    sign of fn but also demands |fn| < atol to stop, so the interval width alone decides.
-    `args` = (tau, atol), both traced: every level shares one compiled root find."""
-
-    g: Callable[[Any, Any], Any]
-
-    def __call__(self, r, args):
-        tau, atol = args
-        grad = self.g(r, tau)
-        return 0.5 * atol * grad / (1.0 + jnp.abs(grad))
-
-
 def _checked_grad(counted, r, tau):
     value = counted.grad(r, tau)
     if not math.isfinite(value):
@@ -306,7 +286,7 @@ def _bracket_from(counted, y0, tau, lower, upper, step, evaluations):
     itself (an exact zero of g, or a bracket end with bound -1 / +1); None when the
     `evaluations` allowed ran out first (then a == b is the furthest point reached downhill).
     """
-    y = min(max(y0, lower), upper)
+    y = counted.on_grid(min(max(y0, lower), upper))
     g_y = _checked_grad(counted, y, tau)
     if g_y == 0.0:
         return y, y, 0
@@ -315,7 +295,7 @@ def _bracket_from(counted, y0, tau, lower, upper, step, evaluations):
     for _ in range(evaluations - 1):
         if y == end:
             return y, y, int(direction)  # downhill all the way to the bracket's end
-        probe = min(max(y + direction * step, lower), upper)
+        probe = counted.on_grid(min(max(y + direction * step, lower), upper))
         g_probe = _checked_grad(counted, probe, tau)
         if (g_probe > 0) != (g_y > 0) or g_probe == 0.0:
             return (y, probe, 0) if direction > 0 else (probe, y, 0)
@@ -323,16 +303,17 @@ def _bracket_from(counted, y0, tau, lower, upper, step, evaluations):
     return (y, y, int(direction)) if y == end else (y, y, None)
 
 
-def _level_bisection(g, counted, y0, tau, lower, upper, tol, max_steps):
+def _level_bisection(counted, y0, tau, lower, upper, tol, max_steps):
     """One continuation level by bisection, warm-started at y0 (the previous level's answer).
 
     dE^2/dr is evaluated at y0 and at points walking downhill from it with doubling steps
-    (first: `tol`) until its sign changes; optx.Bisection then halves that bracket until it is
-    narrower than `tol` and returns its midpoint. A warm start near the answer costs about three
-    gradient evaluations per level, where bisecting the whole bracket at every level spends the
-    budget before the last one. At most `max_steps` gradient evaluations; returns
-    ((r, bound), evaluations, converged) with bound -1 / +1 when the minimum is on the bracket's
-    lower / upper edge.
+    (first: `tol`) until its sign changes; the bracket is then halved at its midpoint until it
+    is narrower than `tol`, and its midpoint returned. A warm start near the answer costs about
+    three gradient evaluations per level, where bisecting the whole bracket at every level
+    spends the budget before the last one. At most `max_steps` gradient evaluations; every point
+    lies on the solve's float grid; a gradient that is not finite is an error. Returns
+    ((r, bound), evaluations, converged) with bound -1 / +1 when the minimum is on the
+    bracket's lower / upper edge.
     """
     before = counted.gradient
     a, b, bound = _bracket_from(counted, y0, tau, lower, upper, tol, max_steps)
@@ -342,24 +323,17 @@ def _level_bisection(g, counted, y0, tau, lower, upper, tol, max_steps):
     # halvings until the bracket is narrower than tol
     needed = math.floor(math.log2(width / tol)) + 1 if width >= tol else 0
     steps = min(needed, max_steps - (counted.gradient - before))
-    if steps < 1:
-        return (0.5 * (a + b), 0), counted.gradient - before, needed == 0
-    # Stop after exactly `steps` halvings (1.5 x the width they leave: no rounding ties).
-    atol = 1.5 * width / 2.0**steps
-    sol = optx.root_find(
-        _Squashed(g),
-        optx.Bisection(rtol=0.0, atol=counted.as_r(atol), flip=False),
-        counted.as_r(a + 0.5 * width),
-        args=(counted.as_r(tau), counted.as_r(atol)),
-        options=dict(lower=counted.as_r(a), upper=counted.as_r(b)),
-        max_steps=64,
-        throw=False,
-    )
-    counted.gradient += int(sol.stats["num_steps"])
-    if not math.isfinite(float(sol.state.error)):
-        raise FloatingPointError(f"dE^2/dr is not finite in [{a}, {b}] (tau={tau})")
-    done = steps == needed and sol.result == optx.RESULTS.successful
-    return (float(sol.value), 0), counted.gradient - before, bool(done)
+    for _ in range(max(steps, 0)):
+        mid = counted.on_grid(0.5 * (a + b))
+        if not a < mid < b:  # the grid has no point strictly inside: as narrow as it gets
+            break
+        g = counted.grad(mid, tau)
+        if not math.isfinite(g):
+            raise FloatingPointError(f"dE^2/dr is not finite in [{a}, {b}] (tau={tau})")
+        if g == 0.0:
+            return (mid, 0), counted.gradient - before, True
+        a, b = (a, mid) if g > 0 else (mid, b)
+    return (counted.on_grid(0.5 * (a + b)), 0), counted.gradient - before, steps == needed
 
 
 def solve(
@@ -384,8 +358,7 @@ def solve(
         sweep_points: an already evaluated sweep (then `steps` is ignored).
         value_and_grad: optional host function `(r, tau) -> (E^2, dE^2/dr)` (floats), used for
             every soft evaluation instead of tracing `e2_soft` (an objective compiled and
-            memoised elsewhere, e.g. `Evaluator`); `e2_soft` is then only traced by the
-            bisection method.
+            memoised elsewhere, e.g. `Evaluator`); `e2_soft` is then never traced.
         answer_name: what the notes call the objective `e_hard` evaluates (the caller knows:
             "E_ref" when it is the expectation over detection draws).
 
@@ -417,7 +390,6 @@ def solve(
     xtol = config.xtol_rel * (hi - lo)
     notes: list[str] = []
 
-    g = _Gradient(e2_soft)
     levels: list[LevelResult] = []
     y, probe = best.r, 0.25 * (upper - lower)
     for i, tau in enumerate(taus):
@@ -433,7 +405,7 @@ def solve(
                 counted, y, tau, lower, upper, probe, tol, max_steps, config.max_evaluations
             )
         else:
-            (r, bound), n, done = _level_bisection(g, counted, y, tau, lower, upper, tol, max_steps)
+            (r, bound), n, done = _level_bisection(counted, y, tau, lower, upper, tol, max_steps)
         if not done:
             notes.append(f"tau={tau:g}: stopped after {n} gradient evaluations (budget share)")
         probe = max(2.0 * tol, abs(r - y)) if levels else max(2.0 * tol, 0.0625 * (upper - lower))

@@ -151,8 +151,8 @@ class Evaluator:
         `e2_soft(r, tau)` is traceable and differentiable in r; inside a compiled solver loop it
         reaches this wrapper's compiled program through a host callback, so the loop does not
         compile the objective a second time and every evaluation is memoised and counted here.
-        `solve` needs it only for its bisection method: give it `host_value_and_grad` too, and
-        every other evaluation goes straight to the compiled program.
+        Give `solve` `host_value_and_grad` too, and it never traces this one: every evaluation
+        goes straight to the compiled program.
         """
         spec = jax.ShapeDtypeStruct((), dtype)
 
