@@ -130,7 +130,8 @@ def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: in
             sensor.setdefault(name, {})[r] = h.rmse_sensor[i]
     first = jax.tree.map(lambda a: np.asarray(a[0]), E.data.scenes)  # nominal variant, first scenario
     cols = [v for v in range(1, first.present.size) if first.present[v]]  # the ego knows itself
-    timeline = {r: np.asarray(ev.detections(r).p_detect[0])[:, cols] for r in sorted({lo, result.r_star, hi})}
+    # From the hard evaluations (memoised: lo and hi are sweep steps), not a program of its own.
+    timeline = {r: np.asarray(ev.hard(r).p_detect[0])[:, cols] for r in sorted({lo, result.r_star, hi})}
     return Curves(r=tuple(r_curve), E_soft=tuple(soft), E_hard=tuple(hard), dE_dr=tuple(grad),
                   horizon_gt=gt, horizon_sensor=sensor, horizon_s=E.spec.horizon_s(), timeline=timeline,
                   timeline_roles=tuple(ROLE_NAMES[int(first.role[v])] for v in cols), dt_s=float(first.dt_s))

@@ -94,6 +94,16 @@ def test_evaluator_memoises_counts_and_matches_the_module(objective):
     assert ev.counts == {"soft": 1, "hard": 1}
 
 
+def test_hard_evaluation_carries_its_detections(objective):
+    # The record the main job's detections figure reads: the 0/1 detections that produced E_hard,
+    # equal to the module's own hard detections, and more of them at a longer range.
+    near, far = objective.hard({R: 20.0}), objective.hard({R: 150.0})
+    det = objective.detections({R: 20.0}, "hard").p_detect
+    np.testing.assert_array_equal(np.asarray(near.p_detect), np.asarray(det))
+    assert set(np.unique(np.asarray(near.p_detect))) <= {0.0, 1.0}
+    assert float(np.sum(far.p_detect)) > float(np.sum(near.p_detect))
+
+
 def test_horizon_rmse_shapes_and_growth(objective):
     h = objective.hard({R: 30.0})
     assert h.rmse_gt.shape == (2, 25) and h.rmse_sensor.shape == (2, 25)

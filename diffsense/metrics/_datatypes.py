@@ -53,6 +53,8 @@ class HardEvaluation:
         sq_true_gt: [N, I, F] squared error of the ground-truth-input prediction against the
             true future [m^2]; sq_true_sensor the same for the sensor-input prediction.
         objective: [] the question's value (`e2` for "eq12"; J for "tracked") [m^2].
+        p_detect: [N, T, V] the 0/1 detections themselves (a suite's fused ones), so a record
+            of what the sensor saw needs no second program.
     """
 
     e2: Float[Array, ""]
@@ -64,3 +66,4 @@ class HardEvaluation:
     sq_true_gt: Float[Array, "N I F"]
     sq_true_sensor: Float[Array, "N I F"]
     objective: Float[Array, ""]
+    p_detect: Float[Array, "N T V"]

@@ -246,7 +246,7 @@ class Objective(eqx.Module):
         return HardEvaluation(e2=e2, sq_error=sq, rmse_gt=rmse(self.data.gt_pred), rmse_sensor=rmse(pred),
                               sq_instant=jnp.mean(jnp.sum((pred - self.data.gt_pred) ** 2, axis=-1), axis=-1),
                               coverage=coverage, sq_true_gt=sq_true(self.data.gt_pred), sq_true_sensor=sq_true(pred),
-                              objective=self._question(pred, coverage[..., 1]))
+                              objective=self._question(pred, coverage[..., 1]), p_detect=det.p_detect)
 
     def reference(self, r: Params) -> ReferenceEvaluation:
         """E_ref at r with its Monte-Carlo standard error: the mean of the hard objective over
