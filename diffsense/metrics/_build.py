@@ -157,9 +157,22 @@ def recorded_scenes(
 
 def ground_truth_predictions(scenes: Scene, frames, fill: FillPolicy, predictor) -> jax.Array:
     """The predictor's output from ground-truth histories at every instant: [N, I, F, 2] [m]."""
-    gt = jax.vmap(lambda s: build_inputs(s, ground_truth_detections(s), frames, fill, predictor.spec))(scenes)
-    pred = jax.jit(lambda p, x: p(x))(predictor, flatten_instants(gt))
-    return pred.reshape(scenes.x_m.shape[0], len(frames), -1, 2)
+    return _ground_truth_predictions(scenes, tuple(int(f) for f in np.asarray(frames)), fill, predictor)
+
+
+@eqx.filter_jit
+def _true_futures(scenes: Scene, frames: tuple[int, ...], spec: InputSpec) -> jax.Array:
+    """The target's true future at every instant of every variant: [N, I, F, 2] [m] (one program)."""
+    return jax.vmap(lambda s: true_future(s, jnp.asarray(frames), spec))(scenes)
+
+
+# One program, inputs and prediction together: built op by op, the inputs alone were some sixty
+# small programs, each traced, lowered and looked up in the compilation cache on every run.
+@eqx.filter_jit
+def _ground_truth_predictions(scenes: Scene, frames: tuple[int, ...], fill: FillPolicy, predictor) -> jax.Array:
+    at = jnp.asarray(frames)
+    gt = jax.vmap(lambda s: build_inputs(s, ground_truth_detections(s), at, fill, predictor.spec))(scenes)
+    return predictor(flatten_instants(gt)).reshape(scenes.x_m.shape[0], len(frames), -1, 2)
 
 
 def with_scenes(E: Objective, scenes: Scene) -> Objective:
@@ -170,9 +183,8 @@ def with_scenes(E: Objective, scenes: Scene) -> Objective:
     pad = E.data.scenes.x_m.shape[0] - scenes.x_m.shape[0]
     if pad:
         scenes = jax.tree.map(lambda a: jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]), scenes)
-    frames = np.asarray(E.frames)
-    fut = jax.vmap(lambda s: true_future(s, frames, E.spec))(scenes)
-    gt_pred = ground_truth_predictions(scenes, frames, E.fill, E.predictor)
+    fut = _true_futures(scenes, E.frames, E.spec)
+    gt_pred = ground_truth_predictions(scenes, np.asarray(E.frames), E.fill, E.predictor)
     return eqx.tree_at(lambda o: (o.data.scenes, o.data.gt_pred, o.data.true_fut), E,
                        (scenes, gt_pred.astype(E.dtype), fut.astype(E.dtype)))
 
@@ -219,8 +231,7 @@ def make_objective(
     noise_keys = jax.random.split(noise_key, n)
     k = estimator.samples if estimator.kind == "mc" else 0
     uniform = jax.vmap(lambda kk: mc_uniforms(kk, k, scenes.x_m.shape[1:], dtype))(jax.random.split(mc_key, n))
-    spec = predictor.spec
-    fut = jax.vmap(lambda s: true_future(s, frames, spec))(scenes)
+    fut = _true_futures(scenes, tuple(int(f) for f in frames), predictor.spec)
     fixed = (scenes, scenario, jnp.ones((n,), dtype), noise_keys, uniform, fut)
     if shard:
         fixed = shard_leading_axis(fixed, pad_weight_index=2)
