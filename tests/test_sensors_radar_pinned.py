@@ -129,6 +129,14 @@ def test_snr_matches_the_linear_radar_equation_to_1e_10_db(range_m, hfov, vfov, 
     assert got == pytest.approx(_linear_snr_db(range_m, hfov, vfov, 10.0, pt, nf), abs=1e-10)
 
 
+def test_processing_gain_adds_and_system_loss_subtracts():
+    # The shipped radar has no processing gain (0 dB: it is inside the 25 kHz bandwidth); a
+    # radar with 10 dB of integration gain and 3 dB of system loss (instead of 6) is 13 dB up.
+    other = cfg.replace(RADAR, processing_gain_db=10.0, system_loss_db=3.0)
+    got = float(sensor.radar_snr_db(jax.numpy.asarray(50.0), 10.0, other.params, other))
+    assert got == pytest.approx(_linear_snr_db(50.0) + 13.0, abs=1e-10)
+
+
 def test_paper_profile_gain_is_the_30_deg_beam_at_any_hfov():
     # The paper's radar: 100 m at every HFOV, its gain that of a 30 x 15 deg beam (17.4039 dBi).
     paper = sensor.load_config("radar", profile="paper")
