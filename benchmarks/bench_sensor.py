@@ -30,12 +30,15 @@ TARGET_MS = 50.0
 
 def engine_scenes(num_variants: int, dtype) -> list:
     from diffsense.metrics import relevance_reach
+    from diffsense.predictors import CSLSTM_SPEC
     from diffsense.scene import list_scenarios, load_scenario, relevant_vehicles, simulate_scenario
+    from diffsense.sensors import make_sensor
 
+    reach = relevance_reach(CSLSTM_SPEC, [make_sensor("radar"), make_sensor("camera")])
     scenes = []
     for i, name in enumerate(list_scenarios()):
         batch = simulate_scenario(load_scenario(name), num_variants, jax.random.key(i), dtype=dtype)
-        scenes.append(relevant_vehicles(batch, **relevance_reach()))
+        scenes.append(relevant_vehicles(batch, **reach))
     return scenes
 
 

@@ -1,0 +1,32 @@
+"""The component benchmarks run on the current API (both once broke unnoticed when
+`relevance_reach` gained its arguments): tiny sizes, checking each prints its table."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(*args: str) -> str:
+    out = subprocess.run([sys.executable, *args], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout
+
+
+def test_bench_scene_runs():
+    text = _run("benchmarks/bench_scene.py", "--variants", "2", "--repeats", "1", "--background", "10")
+    assert "all six" in text and "relevant set of sc01" in text
+    kept = [line.split() for line in text.splitlines() if line.strip().startswith(("0 ", "10 "))]
+    assert [row[0] for row in kept] == ["0", "10"] and int(kept[1][1]) == int(kept[0][1]) + 10
+
+
+@pytest.mark.slow
+def test_bench_sensor_runs():
+    text = _run("benchmarks/bench_sensor.py", "--variants", "2", "--repeats", "1")
+    rows = [line for line in text.splitlines() if line.startswith(("radar ", "camera "))]
+    assert len(rows) == 12 and all(row.split()[-1] in ("ok", "MISSED") for row in rows), text
