@@ -128,7 +128,8 @@ def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: in
         for i, name in enumerate(E.scenario_names):
             gt[name] = h.rmse_gt[i]
             sensor.setdefault(name, {})[r] = h.rmse_sensor[i]
-    first = jax.tree.map(lambda a: np.asarray(a)[0], E.data.scenes)  # nominal variant, first scenario
+    # a[0] on the device: in a multi-process run the whole array is not addressable here
+    first = jax.tree.map(lambda a: np.asarray(a[0]), E.data.scenes)  # nominal variant, first scenario
     cols = [v for v in range(1, first.present.size) if first.present[v]]  # the ego knows itself
     # From the hard evaluations (memoised: lo and hi are sweep steps), not a program of its own.
     timeline = {r: np.asarray(ev.hard(r).p_detect[0])[:, cols] for r in sorted({lo, result.r_star, hi})}
