@@ -3,6 +3,7 @@
     python tools/mutation.py sensors                  # every file of diffsense/sensors/
     python tools/mutation.py sensors --files _camera.py _radar.py
     python tools/mutation.py solve --rev HEAD~1 --max-children 2
+    python tools/mutation.py metrics --sample 70 --seed 0   # a uniform sample of the mutants
 
 The commit `--rev` (default HEAD: commit first) is exported with `git archive` into a scratch
 directory, so edits in the working tree during the run change nothing. There the `[mutmut]`
@@ -11,6 +12,12 @@ mutate and a fast, relevant test subset) and `mutmut run` mutates the package, r
 mutant only the selected tests that reach the mutated function. The summary (counts per file and
 every surviving mutant's diff) is printed and written to `<workdir>/report.md`; review each
 survivor there: kill it with a test or list it in docs/mutation.md as equivalent, with why.
+
+`--sample N` estimates a package's score without running every mutant: a first `mutmut run`
+generates all mutants and records the tests' statistics but runs no mutant (it is given a name
+that matches none), then N names are drawn uniformly without replacement (from the sorted names,
+seeded by `--seed`, so the draw is the same on every machine) and only they are run. The report
+gives the sample's killed / survived / other and killed / N with a 95 % Wilson interval.
 
 mutmut's fork server imports only third-party packages (tools/mutation_preload.txt) before it
 forks a process per mutant, which imports diffsense and the tests afresh: a process that had
@@ -23,7 +30,10 @@ from __future__ import annotations
 import argparse
 import collections
 import configparser
+import fnmatch
 import json
+import math
+import random
 import shutil
 import subprocess
 import sys
@@ -33,6 +43,32 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("sensors", "tracks", "metrics", "solve")
+
+
+# A mutant name pattern that matches no mutant: `mutmut run` with it generates the mutants and
+# collects the test statistics, then stops before running any mutant.
+_NO_MUTANT = "no-mutant-has-this-name"
+_Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
+
+
+def draw_sample(names: list[str], n: int, seed: int = 0) -> list[str]:
+    """`n` of `names` drawn uniformly without replacement, the same for the same names and seed
+    (whatever their order); returned sorted."""
+    pool = sorted(set(names))
+    if not 0 <= n <= len(pool):
+        raise ValueError(f"cannot draw {n} of {len(pool)} mutants")
+    return sorted(random.Random(seed).sample(pool, n))
+
+
+def wilson_interval(successes: int, trials: int, z: float = _Z95) -> tuple[float, float]:
+    """The Wilson score interval of a binomial proportion (95 % for the default z)."""
+    if trials <= 0 or not 0 <= successes <= trials:
+        raise ValueError(f"{successes} successes of {trials} trials")
+    p = successes / trials
+    z2n = z * z / trials
+    centre = (p + z2n / 2) / (1 + z2n)
+    half = z / (1 + z2n) * math.sqrt(p * (1 - p) / trials + z2n / (4 * trials))
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def _export(rev: str, workdir: Path) -> str:
@@ -80,9 +116,30 @@ def _diff(workdir: Path, name: str) -> str:
     return "\n".join(lines)
 
 
+def _sample_lines(results: dict[str, str], population: int, seed: int) -> list[str]:
+    """The report's paragraph on a sampled run: its counts and killed / sampled with its
+    interval (equivalent mutants are not known yet: the docs correct the score for them)."""
+    counts = collections.Counter(results.values())
+    n, killed = len(results), counts["killed"]
+    low, high = wilson_interval(killed, n)
+    return [f"Sample: {n} of {population} mutants, seed {seed}: {killed} killed, "
+            f"{counts['survived']} survived, {n - killed - counts['survived']} other "
+            f"({', '.join(f'{c} {s}' for s, c in sorted(counts.items()))}).", "",
+            f"Score of the sample: {killed} / {n} = {100 * killed / n:.1f} % "
+            f"(95 % Wilson interval {100 * low:.1f} % to {100 * high:.1f} %), before "
+            "equivalent mutants are taken out.", ""]
+
+
 def _report(workdir: Path, package: str, commit: str, tests: list[str], command: str,
-            wall_s: float) -> str:
+            wall_s: float, names: list[str] | None = None, sample: tuple[int, int] | None = None,
+            ) -> str:
+    """The report of the run: of the mutants in `names` if given (a sample or --mutants), with
+    the sample's paragraph if `sample` = (all mutants, seed)."""
     results = _results(workdir)
+    if names:
+        wanted = set(names)
+        results = {name: status for name, status in results.items()
+                   if name in wanted or any(fnmatch.fnmatch(name, w) for w in wanted)}
     by_file: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
     for name, status in results.items():
         module = name.split(".x_")[0].split(".xǁ")[0]
@@ -90,8 +147,10 @@ def _report(workdir: Path, package: str, commit: str, tests: list[str], command:
     total = collections.Counter(results.values())
     lines = [f"# Mutation run: diffsense/{package} at {commit[:12]}", "",
              f"Command: `{command}` ({wall_s / 60:.1f} min)", "",
-             f"Tests: {' '.join(tests)}", "",
-             "| module | mutants | killed | survived | other |", "|---|---|---|---|---|"]
+             f"Tests: {' '.join(tests)}", ""]
+    if sample is not None:
+        lines += _sample_lines(results, *sample)
+    lines += ["| module | mutants | killed | survived | other |", "|---|---|---|---|---|"]
     for module, counts in sorted(by_file.items()):
         other = sum(counts.values()) - counts["killed"] - counts["survived"]
         lines.append(f"| {module} | {sum(counts.values())} | {counts['killed']} | "
@@ -107,7 +166,7 @@ def _report(workdir: Path, package: str, commit: str, tests: list[str], command:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parse(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("package", choices=PACKAGES)
     parser.add_argument("--files", nargs="*", default=[], help="file names inside the package")
@@ -118,20 +177,47 @@ def main(argv: list[str] | None = None) -> int:
                         help="run only these mutants (names from an earlier report; the names "
                              "hold while the package's source is unchanged), e.g. to re-check "
                              "survivors after adding tests")
+    parser.add_argument("--sample", type=int, metavar="N",
+                        help="run only N mutants drawn uniformly from all of them (an estimate)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of --sample's draw (default 0)")
     parser.add_argument("--report-only", action="store_true",
                         help="only (re)write the report of the finished run in --workdir")
     args = parser.parse_args(argv)
+    if args.report_only and args.workdir is None:
+        parser.error("--report-only needs the --workdir of the run")
+    if args.sample is not None and (args.mutants or args.sample < 1):
+        parser.error("--sample takes N >= 1, and no --mutants")
+    return args
+
+
+def _draw(workdir: Path, args: argparse.Namespace) -> tuple[list[str], int]:
+    """Generate every mutant and the test statistics without running a mutant, then draw the
+    sample; returns its names and the number of mutants."""
+    subprocess.run(["mutmut", "run", "--max-children", str(args.max_children), _NO_MUTANT],
+                   cwd=workdir)  # fails on purpose once the statistics are saved: no name matches
+    names = list(_results(workdir))
+    names = draw_sample(names, min(args.sample, len(names)), args.seed)
+    population = len(_results(workdir))
+    (workdir / "sample.json").write_text(json.dumps(
+        {"population": population, "seed": args.seed, "names": names}, indent=1))
+    return names, population
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parse(argv)
     if shutil.which("mutmut") is None:
         print("error: mutmut is not installed (pip install -e '.[mutation]')", file=sys.stderr)
         return 2
     command = "python tools/mutation.py " + " ".join(argv if argv is not None else sys.argv[1:])
     if args.report_only:
-        if args.workdir is None:
-            parser.error("--report-only needs the --workdir of the run")
         tests = configparser.ConfigParser()
         tests.read(args.workdir / "setup.cfg")
+        drawn = args.workdir / "sample.json"
+        drawn = json.loads(drawn.read_text()) if drawn.exists() else None
         report = _report(args.workdir, args.package, "(as run)",
-                         tests["mutmut"]["pytest_add_cli_args_test_selection"].split(), command, 0.0)
+                         tests["mutmut"]["pytest_add_cli_args_test_selection"].split(), command, 0.0,
+                         drawn["names"] if drawn else args.mutants,
+                         (drawn["population"], drawn["seed"]) if drawn else None)
         (args.workdir / "report.md").write_text(report)
         print(report)
         return 0
@@ -140,14 +226,19 @@ def main(argv: list[str] | None = None) -> int:
     tests = _configure(workdir, args.package, args.files)
     print(f"mutating diffsense/{args.package} of {commit[:12]} in {workdir}", flush=True)
     start = time.perf_counter()
-    run = subprocess.run(["mutmut", "run", "--max-children", str(args.max_children), *args.mutants],
+    names, sample = list(args.mutants), None
+    if args.sample is not None:
+        names, population = _draw(workdir, args)
+        sample = (population, args.seed)
+        print(f"sample: {len(names)} of {population} mutants (seed {args.seed})", flush=True)
+    run = subprocess.run(["mutmut", "run", "--max-children", str(args.max_children), *names],
                          cwd=workdir)
     wall_s = time.perf_counter() - start
     if not (workdir / "mutants" / "mutmut-stats.json").exists():
         print(f"error: mutmut collected no test statistics (exit {run.returncode}): run the "
               f"package's tests in {workdir} to see why", file=sys.stderr)
         return 1
-    report = _report(workdir, args.package, commit, tests, command, wall_s)
+    report = _report(workdir, args.package, commit, tests, command, wall_s, names, sample)
     (workdir / "report.md").write_text(report)
     print(report)
     print(json.dumps({"report": str(workdir / "report.md"), "mutmut_exit": run.returncode}))

@@ -1,0 +1,60 @@
+"""tools/mutation.py's pure parts: the sample's draw and the Wilson interval of its score."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+import pytest
+
+_spec = importlib.util.spec_from_file_location(
+    "mutation_tool", Path(__file__).resolve().parents[1] / "tools" / "mutation.py")
+mutation = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(mutation)
+
+NAMES = [f"diffsense.solve._box.x_f__mutmut_{i}" for i in range(1, 301)]
+
+
+def test_sample_is_n_distinct_names_of_the_population():
+    drawn = mutation.draw_sample(NAMES, 70, seed=0)
+    assert len(drawn) == 70 == len(set(drawn))
+    assert set(drawn) <= set(NAMES)
+    assert drawn == sorted(drawn)
+
+
+def test_same_seed_same_sample_whatever_the_order_of_the_names():
+    shuffled = NAMES[::-1][150:] + NAMES[::-1][:150]
+    assert mutation.draw_sample(NAMES, 70, seed=3) == mutation.draw_sample(shuffled, 70, seed=3)
+    assert mutation.draw_sample(NAMES, 70, seed=3) != mutation.draw_sample(NAMES, 70, seed=4)
+
+
+def test_sample_of_all_is_all_and_too_many_is_refused():
+    assert mutation.draw_sample(NAMES, len(NAMES)) == sorted(NAMES)
+    with pytest.raises(ValueError):
+        mutation.draw_sample(NAMES, len(NAMES) + 1)
+
+
+def test_sample_is_uniform():
+    # each of 10 names drawn 3 at a time over 2000 seeds: expected 600 draws each, binomial
+    # sd sqrt(2000 * 0.3 * 0.7) = 20.5; 5 sd either side
+    counts = {name: 0 for name in NAMES[:10]}
+    for seed in range(2000):
+        for name in mutation.draw_sample(NAMES[:10], 3, seed):
+            counts[name] += 1
+    assert all(abs(c - 600) < 103 for c in counts.values()), counts
+
+
+def test_wilson_interval_textbook_values():
+    # Newcombe (1998), Stat. Med. 17:857, table I: 81/263 -> 0.2553 to 0.3662 (method 3)
+    low, high = mutation.wilson_interval(81, 263)
+    assert (round(low, 4), round(high, 4)) == (0.2553, 0.3662)
+    # 15/148 -> 0.0624 to 0.1605 and 0/20 -> 0 to 0.1611 from the same table
+    assert tuple(round(v, 4) for v in mutation.wilson_interval(15, 148)) == (0.0624, 0.1605)
+    low, high = mutation.wilson_interval(0, 20)
+    assert low == 0.0 and round(high, 4) == 0.1611
+
+
+def test_wilson_interval_solves_the_score_equation():
+    # the bounds are the two p with (k/n - p)^2 = z^2 p (1 - p) / n
+    k, n, z = 63, 70, 1.959963984540054
+    for p in mutation.wilson_interval(k, n):
+        assert math.isclose((k / n - p) ** 2, z * z * p * (1 - p) / n, rel_tol=1e-9)
