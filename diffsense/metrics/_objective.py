@@ -45,8 +45,8 @@ from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli, re
 from diffsense.metrics._reference import (
     ReferenceEvaluation,
     declares_random_law,
+    detection_events,
     is_deterministic,
-    reference_uniforms,
     summarise,
 )
 from diffsense.predictors import InputSpec
@@ -146,11 +146,15 @@ class Objective(eqx.Module):
             det = dataclasses.replace(det, p_detect=(det.p_detect >= 0.5).astype(det.p_detect.dtype))
         return det
 
-    def _sensor_detections(self, r: Params, mode: Mode, tau: float | Array = 1.0) -> Detections:
-        params, tau = self._params(r), jnp.asarray(tau).astype(self.dtype)
+    def _per_variant(self, r: Params, look: Callable[[Any, dict[str, Array], Array, Weather], Any]) -> Any:
+        """look(scene, params, noise key, weather) of every variant at r (vmapped over variants)."""
+        params = self._params(r)
         weather = jax.tree.map(lambda v: jnp.asarray(v).astype(self.dtype), self.weather)
-        return jax.vmap(lambda s, k, w: self.sensor.detect(s, params, k, mode=mode, temperature=tau, weather=w))(
-            self.data.scenes, self.data.noise_key, weather)
+        return jax.vmap(lambda s, k, w: look(s, params, k, w))(self.data.scenes, self.data.noise_key, weather)
+
+    def _sensor_detections(self, r: Params, mode: Mode, tau: float | Array = 1.0) -> Detections:
+        tau = jnp.asarray(tau).astype(self.dtype)
+        return self._per_variant(r, lambda s, p, k, w: self.sensor.detect(s, p, k, mode=mode, temperature=tau, weather=w))
 
     def _predict(self, det: Detections) -> Float[Array, "N I F 2"]:
         frames = jnp.asarray(self.frames)
@@ -182,29 +186,30 @@ class Objective(eqx.Module):
         kind = self.estimator.kind
         if (kind == "relaxed-reference" and not is_deterministic(self.sensor)) or \
                 (kind == "auto" and declares_random_law(self.sensor)):
-            # The reference's own p (exact occlusion geometry): under a probabilistic law p is
-            # already smooth in the sensor's parameters, and only the draw needs relaxing, so
-            # the estimate tends to E_ref itself as the temperature falls.
-            det = self._sensor_detections(r, "hard")
+            # The reference's own events (exact occlusion geometry; a suite's members one by
+            # one): under a probabilistic law p is already smooth in the sensor's parameters,
+            # and only the draw needs relaxing, so the estimate tends to E_ref itself as the
+            # temperature falls.
+            events = detection_events(self, r)
             draws = jnp.arange(self.estimator.reference_draws)
             temperature = self.estimator.reference_temperature * jnp.asarray(tau, self.dtype)
 
             def relax(draw):
-                u = reference_uniforms(self.data.noise_key, draw, det.p_detect.shape[1:], self.dtype)
-                return relaxed_draw(det.p_detect, u, temperature)
+                us = events.uniforms(self.data.noise_key, draw)
+                return events.combine([relaxed_draw(p, u, temperature) for p, u in zip(events.p_detect, us)])
         else:
             det = self.detections(r, "soft", tau)
             if kind != "mc":
                 return reduce(self._predict(det), det)
             draws = jnp.swapaxes(self.data.mc_uniform, 0, 1)
-            relax = lambda u: relaxed_bernoulli(det.p_detect, u, self.estimator.relax_temperature)
+            relax = lambda u: dataclasses.replace(det, p_detect=relaxed_bernoulli(det.p_detect, u, self.estimator.relax_temperature))
 
         # Rematerialised: reverse mode would otherwise keep every sample's predictor activations
         # (on the default problem K = 64 asked for 35 GB); each sample's forward pass is
         # recomputed in the backward pass instead, so memory does not grow with K.
         @jax.checkpoint
         def one_sample(draw):
-            d = dataclasses.replace(det, p_detect=relax(draw))
+            d = relax(draw)
             return reduce(self._predict(d), d)
 
         return jnp.mean(jax.lax.map(one_sample, draws), axis=0)
@@ -253,12 +258,12 @@ class Objective(eqx.Module):
         `estimator.reference_draws` detection draws with common random numbers (`_reference.py`)."""
         if is_deterministic(self.sensor):
             return summarise(self.hard(r).objective[None])
-        det = self._sensor_detections(r, "hard")
+        events = detection_events(self, r)
 
         @jax.checkpoint
         def one_draw(draw):
-            u = reference_uniforms(self.data.noise_key, draw, det.p_detect.shape[1:], self.dtype)
-            d = dataclasses.replace(det, p_detect=(u < det.p_detect).astype(self.dtype))
+            us = events.uniforms(self.data.noise_key, draw)
+            d = events.combine([(u < p).astype(self.dtype) for p, u in zip(events.p_detect, us)])
             coverage = jax.vmap(coverage_classes)(self._target_window(d))
             return self._question(self._predict(d), coverage[..., 1])
 

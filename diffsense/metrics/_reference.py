@@ -7,8 +7,12 @@ draw detecting (frame, vehicle) when u < p for a uniform u:
 
     E_ref(r)^2 = (1/K) sum_k E_hard^2(r; detections 1[u_k < p(r)])                       [m^2]
 
-The uniforms come from each variant's measurement-noise key folded with a fixed stream number
-and the draw's index: common random numbers, so E_ref is a deterministic function of r for a
+A suite's members detect independently (`diffsense.sensors.Suite`), so a draw decides each
+member's detection with its own uniform and fuses the measurements of the members that drew
+one (inverse-variance weighting): the track's position in a draw is that of the members that saw
+the car, not the fused expectation over which members might have. The uniforms come from each
+variant's measurement-noise key folded with a fixed stream number and the draw's index (and,
+for a suite, the member's index): common random numbers, so E_ref is a deterministic function of r for a
 seed, and its differences between two r are not drowned by draw-to-draw noise. K is
 `EstimatorConfig.reference_draws`. The Monte-Carlo standard error of E_ref^2 is the draws'
 sample standard deviation over sqrt(K); that of E_ref is it over 2 E_ref (delta method).
@@ -20,6 +24,7 @@ and E_ref = E_hard with standard error 0: it is computed once, not K times.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import jax
@@ -27,6 +32,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from diffsense.metrics._estimators import _clipped_logit  # the relaxed draw's clipping
+from diffsense.sensors import Suite
+from diffsense.sensors._datatypes import Detections
+from diffsense.sensors._fusion import fuse_members
 
 # Folded into each variant's noise key to give the reference's uniforms their own stream.
 _REFERENCE_STREAM = 0x13
@@ -74,13 +82,50 @@ def declares_random_law(sensor: Any) -> bool:
     return detection is not None and detection.law != "threshold"
 
 
-def reference_uniforms(noise_key: Array, draw: Array, shape: tuple[int, ...], dtype) -> Float[Array, "N T V"]:
-    """The uniforms in [0, 1) of reference draw `draw`, one [T, V] array per variant's key."""
+def reference_uniforms(noise_key: Array, draw: Array, shape: tuple[int, ...], dtype,
+                       member: int | None = None) -> Float[Array, "N T V"]:
+    """The uniforms in [0, 1) of reference draw `draw`, one [T, V] array per variant's key
+    (suite member `member`'s own stream when given)."""
     def one(key):
         stream = jax.random.fold_in(jax.random.fold_in(key, _REFERENCE_STREAM), draw)
+        if member is not None:
+            stream = jax.random.fold_in(stream, member)
         return jax.random.uniform(stream, shape, dtype=dtype)
 
     return jax.vmap(one)(noise_key)
+
+
+@dataclasses.dataclass(frozen=True)
+class DetectionEvents:
+    """The independent detection events of every variant at one r, and what a draw of them gives.
+
+    Attributes:
+        p_detect: one [N, T, V] probability per event: the sensor's own, or each suite member's.
+        members: the events' uniform streams: (None,) for one sensor, (0, ..., M-1) for a suite.
+        combine: drawn outcomes (one [N, T, V] array per event: 0/1, or relaxed draws) -> the
+            Detections the tracks are built from (a suite's fused).
+    """
+
+    p_detect: list[Float[Array, "N T V"]]
+    members: tuple[int | None, ...]
+    combine: Callable[[Sequence[Array]], Detections]
+
+    def uniforms(self, noise_key: Array, draw: Array) -> list[Float[Array, "N T V"]]:
+        """Each event's uniforms of reference draw `draw` (common random numbers)."""
+        p = self.p_detect[0]
+        return [reference_uniforms(noise_key, draw, p.shape[1:], p.dtype, m) for m in self.members]
+
+
+def detection_events(objective: Any, r: Any) -> DetectionEvents:
+    """The detection events of `objective` (a `diffsense.metrics.Objective`) at r (a dict)."""
+    sensor = objective.sensor
+    if not isinstance(sensor, Suite):
+        det = objective._sensor_detections(r, "hard")
+        return DetectionEvents([det.p_detect], (None,), lambda drawn: dataclasses.replace(det, p_detect=drawn[0]))
+    views = objective._per_variant(r, lambda s, p, k, w: sensor.member_views(s, p, k, mode="hard", weather=w))
+    scenes = objective.data.scenes
+    return DetectionEvents([d.p_detect for d, _ in views], tuple(range(len(views))),
+                           lambda drawn: fuse_members(scenes, views, drawn)[0])
 
 
 def summarise(draws: Float[Array, " K"]) -> ReferenceEvaluation:
@@ -99,9 +144,15 @@ def reference_draw_margins(objective: Any, r: Any, draws: int) -> Float[Array, "
 
     How far each (draw, variant, frame, vehicle) detection is from flipping: the relaxed
     reference at temperature lambda differs from its hard draw by sigmoid(-margin / lambda), so the
-    smallest margins say which draws carry the relaxed estimator's gap to E_ref. `objective` is a
+    smallest margins say which draws carry the relaxed estimator's gap to E_ref. For a suite it is
+    the smallest over the members (the member nearest to flipping). `objective` is a
     `diffsense.metrics.Objective`; r its parameters (a dict, or the value of a one-parameter problem).
     """
-    p = objective._sensor_detections(objective.point(r), "hard").p_detect
-    u = jax.vmap(lambda d: reference_uniforms(objective.data.noise_key, d, p.shape[1:], p.dtype))(jnp.arange(draws))
-    return jnp.abs(_clipped_logit(p)[None] - _clipped_logit(u))
+    events = detection_events(objective, objective.point(r))
+
+    def one(draw):
+        us = events.uniforms(objective.data.noise_key, draw)
+        margins = [jnp.abs(_clipped_logit(p) - _clipped_logit(u)) for p, u in zip(events.p_detect, us)]
+        return jnp.min(jnp.stack(margins), axis=0)
+
+    return jax.vmap(one)(jnp.arange(draws))

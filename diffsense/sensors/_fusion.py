@@ -17,7 +17,9 @@ prod_{i in S} p_i prod_{j not in S} (1 - p_j), normalised over the non-empty set
 So a member with p = 0 contributes nothing (its sets have weight 0), with every p in {0, 1}
 (hard mode) it is exactly inverse-variance fusion of the detecting members, and the fused
 covariance `Covariance` is the same expectation of C_S = (sum_{i in S} C_i^-1)^-1, which is
-below every detecting member's (in the positive semi-definite order). A suite of M members
+below every detecting member's (in the positive semi-definite order). A draw of the detections
+(the reference objective's) decides each member on its own: `member_views` gives the members'
+views, `fuse_members` fuses them with the drawn 0/1 in place of each p. A suite of M members
 forms 2^M - 1 sets; M <= 6.
 
 Parameters are the members' under qualified names, "<member>.<parameter>" ("radar.hfov_deg").
@@ -95,6 +97,24 @@ def fuse(dets: Sequence[Detections], covs: Sequence[Covariance]) -> tuple[Detect
     return Detections(p_detect=p, x_m=expect(xs), y_m=expect(ys)), fused
 
 
+def fuse_members(scene: Scene, views: Sequence[tuple[Detections, Covariance]],
+                 p_detect: Sequence[Array] | None = None) -> tuple[Detections, Covariance]:
+    """The fused Detections and covariance of the members' `views` (`Suite.member_views`) of
+    `scene`, arrays [..., T, V]; `p_detect` replaces each member's probability when given (a draw:
+    with every p in {0, 1} the fused position is the inverse-variance fusion of the members that
+    drew a detection)."""
+    dets = [v[0] for v in views]
+    if p_detect is not None:
+        dets = [dataclasses.replace(d, p_detect=p) for d, p in zip(dets, p_detect, strict=True)]
+    det, cov = fuse(dets, [v[1] for v in views])
+    # The ego knows itself and padding stays where the scene put it: the members agree on
+    # those positions, and fusion would reproduce them only to rounding.
+    known = (jnp.arange(scene.x_m.shape[-1]) == EGO_INDEX) | ~(scene.present[..., None, :] != 0)  # [..., T, V]
+    det = Detections(p_detect=det.p_detect, x_m=jnp.where(known, scene.x_m, det.x_m),
+                     y_m=jnp.where(known, scene.y_m, det.y_m))
+    return det, cov
+
+
 class Suite(Sensor):
     """Sensors on one ego fused into one track per vehicle (module docstring for the rules).
 
@@ -146,26 +166,27 @@ class Suite(Sensor):
         keys = jax.random.split(noise, m)
         return [keys[i] for i in range(m)]
 
-    def detect_with_covariance(self, scene: Scene, r: dict[str, Any] | None = None,
-                               noise: KeyOrNoise | None = None, *, mode: Mode = "soft",
-                               temperature: Float[ArrayLike, ""] = 1.0, weather: Weather = CLEAR
-                               ) -> tuple[Detections, Covariance]:
-        """`detect`, and the fused measurement covariance [T, V] [m^2]; every member sees `weather`."""
+    def member_views(self, scene: Scene, r: dict[str, Any] | None = None, noise: KeyOrNoise | None = None, *,
+                     mode: Mode = "soft", temperature: Float[ArrayLike, ""] = 1.0, weather: Weather = CLEAR
+                     ) -> list[tuple[Detections, Covariance]]:
+        """Each member's Detections [T, V] of `scene` and their world covariance [m^2], unfused:
+        the independent detection events a draw decides one by one (`fuse_members`)."""
         full = self.defaults()
         for name, value in (r or {}).items():
             self.spec(name)
             full[name] = value
         if noise is None:
             raise InputError("detect needs a noise key (or the noise draws)")
-        views = [member_view(m, scene, ri, ni, mode, temperature, weather)
-                 for m, ri, ni in zip(self.members, self._split(full), self._noises(noise, scene))]
-        det, cov = fuse([v[0] for v in views], [v[1] for v in views])
-        # The ego knows itself and padding stays where the scene put it: the members agree on
-        # those positions, and fusion would reproduce them only to rounding.
-        known = (jnp.arange(scene.x_m.shape[-1]) == EGO_INDEX) | ~(scene.present != 0)
-        det = Detections(p_detect=det.p_detect, x_m=jnp.where(known, scene.x_m, det.x_m),
-                         y_m=jnp.where(known, scene.y_m, det.y_m))
-        return det, cov
+        return [member_view(m, scene, ri, ni, mode, temperature, weather)
+                for m, ri, ni in zip(self.members, self._split(full), self._noises(noise, scene))]
+
+    def detect_with_covariance(self, scene: Scene, r: dict[str, Any] | None = None,
+                               noise: KeyOrNoise | None = None, *, mode: Mode = "soft",
+                               temperature: Float[ArrayLike, ""] = 1.0, weather: Weather = CLEAR
+                               ) -> tuple[Detections, Covariance]:
+        """`detect`, and the fused measurement covariance [T, V] [m^2]; every member sees `weather`."""
+        views = self.member_views(scene, r, noise, mode=mode, temperature=temperature, weather=weather)
+        return fuse_members(scene, views)
 
     def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode,
                 temperature, weather: Weather = CLEAR) -> Detections:

@@ -1,0 +1,165 @@
+"""A suite's reference draws each member's detection on its own (`diffsense.metrics._reference`):
+the fused track of a draw is the inverse-variance fusion of the members that drew a detection.
+
+Checked against a numpy recomputation (2x2 inverses, written apart from `fuse`), and by the law of
+large numbers against what independent members imply: the track exists with probability
+1 - (1 - p_radar)(1 - p_camera), and its mean position given that it exists is the fused
+expectation `fuse` forms from the probabilities (`diffsense.sensors._fusion`).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense import config as cfg
+from diffsense import sensors as sensor
+from diffsense.metrics import EstimatorConfig, make_objective
+from diffsense.metrics._reference import detection_events, reference_uniforms
+from diffsense.sensors._fusion import Suite
+from diffsense.sensors._laws import CameraDetection, RadarDetection
+from diffsense.tracks import prediction_frames
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
+
+RADAR = sensor.Radar(cfg.replace(sensor.load_config("radar"), detection=RadarDetection(law="swerling1")))
+CAMERA = sensor.Camera(cfg.replace(sensor.load_config("camera"), detection=CameraDetection(law="confidence")))
+NAMES = ("radar.hfov_deg", "camera.hfov_deg")
+# Narrow enough that both members see the toy scene's cars on their beam's and image's edges.
+R_EDGE = (8.0, 20.0)
+Z = 4.0  # the law-of-large-numbers bound in standard errors (Bonferroni over the elements checked)
+
+
+def suite_objective(kind="relaxed-reference", draws=4, key=None):
+    scenes, scenario = toy_scenes(1)
+    frames = prediction_frames(scenes.num_frames)[:3]
+    return make_objective(scenes, scenario, frames, Suite((RADAR, CAMERA)), ToyPredictor(jnp.asarray(TOY_GAIN)),
+                          names=NAMES, key=key, estimator=EstimatorConfig(kind=kind, reference_draws=draws), shard=False)
+
+
+@pytest.fixture(scope="module")
+def suite():
+    return suite_objective()
+
+
+def _r(values):
+    return dict(zip(NAMES, (jnp.asarray(v) for v in values)))
+
+
+@eqx.filter_jit
+def _draws(obj, values, draws):
+    """Each member's p and uniforms, and the combined detections, of reference draws 0..draws-1."""
+    events = detection_events(obj, _r(values))
+
+    def one(d):
+        us = events.uniforms(obj.data.noise_key, d)
+        det = events.combine([(u < p).astype(p.dtype) for p, u in zip(events.p_detect, us)])
+        return us, det
+
+    us, det = jax.lax.map(one, jnp.arange(draws))
+    return events.p_detect, us, det
+
+
+@eqx.filter_jit
+def _views(obj, values):
+    r = _r(values)
+    return obj._per_variant(r, lambda s, p, k, w: obj.sensor.member_views(s, p, k, mode="hard", weather=w))
+
+
+def _inverse_variance(xs, ys, covs, detected):
+    """Fusion of the detecting members at one (frame, vehicle), by numpy's 2x2 inverse."""
+    info = [np.linalg.inv(np.array([[c[0], c[1]], [c[1], c[2]]])) for c in covs]
+    j = sum(i for i, d in zip(info, detected) if d)
+    b = sum(i @ np.array([x, y]) for i, x, y, d in zip(info, xs, ys, detected) if d)
+    return np.linalg.solve(j, b)
+
+
+def test_a_draw_fuses_the_members_that_detect(suite):
+    p, us, det = _draws(suite, R_EDGE, 4)
+    views = _views(suite, R_EDGE)
+    present = np.asarray(suite.data.scenes.present) != 0
+    seen = {1: 0, 2: 0}
+    for k in range(4):
+        drawn = [np.asarray(us[i][k]) < np.asarray(p[i]) for i in range(2)]
+        np.testing.assert_array_equal(np.asarray(det.p_detect[k]), (drawn[0] | drawn[1]).astype(float))
+        for n, t, v in zip(*np.nonzero(drawn[0] | drawn[1])):
+            if v == 0 or not present[n, v]:
+                continue  # the ego and padding keep the scene's positions
+            who = [bool(d[n, t, v]) for d in drawn]
+            seen[sum(who)] += 1
+            xs = [float(view[0].x_m[n, t, v]) for view in views]
+            ys = [float(view[0].y_m[n, t, v]) for view in views]
+            covs = [(float(c.xx[n, t, v]), float(c.xy[n, t, v]), float(c.yy[n, t, v])) for _, c in views]
+            expected = _inverse_variance(xs, ys, covs, who)
+            got = np.array([float(det.x_m[k, n, t, v]), float(det.y_m[k, n, t, v])])
+            np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-9)
+    assert seen[1] >= 10 and seen[2] >= 10, seen  # draws where one member, and both, detect
+
+
+def test_members_draw_independently_and_the_track_has_the_fused_probability(suite):
+    k = 4000
+    p, us, det = _draws(suite, R_EDGE, k)
+    p = [np.asarray(q) for q in p]
+    u = [np.asarray(x) for x in us]
+    # each member has its own stream: uncorrelated, and neither is the one-sensor stream
+    corr = np.corrcoef(u[0].ravel(), u[1].ravel())[0, 1]
+    assert abs(corr) < 3 / np.sqrt(u[0].size)
+    own = np.asarray(reference_uniforms(suite.data.noise_key, jnp.asarray(0), p[0].shape[1:], p[0].dtype))
+    assert not np.array_equal(own, u[0][0]) and not np.array_equal(own, u[1][0])
+    # the track exists with probability 1 - (1 - p_radar)(1 - p_camera)
+    fused = 1.0 - (1.0 - p[0]) * (1.0 - p[1])
+    share = np.mean(np.asarray(det.p_detect), axis=0)
+    edge = (p[0] > 0.05) & (p[0] < 0.95) & (p[1] > 0.05) & (p[1] < 0.95)
+    assert edge.sum() >= 20
+    se = np.sqrt(fused * (1 - fused) / k)
+    # Z standard errors per element: over ~30 elements a family-wise false alarm of ~0.2 %. Drawn
+    # from one uniform, the members would give max(p_radar, p_camera): 0.75 -> 0.5 at p = 1/2, 50 SE.
+    assert np.all(np.abs(share - fused)[edge] < Z * se[edge] + 1e-12)
+    # given that it exists, its mean position is the fused expectation over who detected
+    soft = eqx.filter_jit(lambda o, v: o._sensor_detections(_r(v), "hard"))(suite, R_EDGE)  # the members' p, fused
+    detected = np.asarray(det.p_detect) > 0
+    for coord, expected in (("x_m", soft.x_m), ("y_m", soft.y_m)):
+        x = np.asarray(getattr(det, coord))
+        count = detected.sum(axis=0)
+        mean = np.where(detected, x, 0.0).sum(axis=0) / np.maximum(count, 1)
+        var = np.where(detected, (x - mean) ** 2, 0.0).sum(axis=0) / np.maximum(count - 1, 1)
+        se_mean = np.sqrt(var / np.maximum(count, 1))
+        spread = edge & (se_mean > 1e-6)
+        assert spread.sum() >= 10
+        np.testing.assert_array_less(np.abs(mean - np.asarray(expected))[spread], Z * se_mean[spread])
+
+
+def test_same_seed_same_suite_reference_bit_for_bit(suite):
+    ref = eqx.filter_jit(lambda o, v: o.reference(_r(v)))
+    a, b = ref(suite, R_EDGE), ref(suite_objective(), R_EDGE)
+    assert np.ptp(np.asarray(a.draws)) > 0  # the draws differ: both laws are random here
+    np.testing.assert_array_equal(np.asarray(a.draws), np.asarray(b.draws))
+    other = ref(suite_objective(key=jax.random.PRNGKey(7)), R_EDGE)
+    assert not np.array_equal(np.asarray(other.draws), np.asarray(a.draws))
+
+
+def test_relaxed_reference_of_a_suite_tends_to_its_reference(suite):
+    e2 = eqx.filter_jit(lambda o, v, tau: o.e2(_r(v), tau))
+    ref = eqx.filter_jit(lambda o, v: o.reference(_r(v)))(suite, R_EDGE)
+    cold = float(e2(suite, R_EDGE, 1e-7))
+    np.testing.assert_allclose(cold, float(ref.e2), rtol=1e-9)
+    warm = float(e2(suite, R_EDGE, 50.0))
+    assert abs(warm - float(ref.e2)) > 1e-3 * float(ref.e2)  # the relaxation shows when warm
+
+
+def test_suite_gradient_against_float64_central_differences_and_finite_at_extremes(suite):
+    vg = eqx.filter_jit(lambda o, x: jax.value_and_grad(lambda v: o.e2(dict(zip(NAMES, v))))(x))
+    x = jnp.asarray(R_EDGE)
+    _, g = vg(suite, x)
+    h = 1e-5
+    for i in range(2):
+        step = jnp.zeros(2).at[i].set(h)
+        fd = (float(vg(suite, x + step)[0]) - float(vg(suite, x - step)[0])) / (2 * h)
+        assert abs(float(g[i])) > 1e-6
+        np.testing.assert_allclose(float(g[i]), fd, rtol=1e-5)
+    for a in (0.01, 360.0):
+        for b in (0.01, 360.0):
+            v, g = vg(suite, jnp.asarray([a, b]))
+            assert np.isfinite(float(v)) and np.all(np.isfinite(np.asarray(g))), (a, b)
