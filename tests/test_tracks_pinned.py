@@ -215,3 +215,18 @@ def test_neighbour_weight_is_seen_at_t_for_zero_and_at_least_once_for_hold():
     weight = {fill: float(build_inputs(scene, det, jax.numpy.asarray([T0]), fill).nbr_weight[0, 1])
               for fill in ("zero", "hold", "interp")}
     assert weight == pytest.approx({"zero": 0.0, "hold": 0.875, "interp": 0.875}, abs=1e-12)
+
+
+def test_the_grid_follows_the_predictor_spec():
+    # A coarser grid than the CS-LSTM's: 5 cells of 20 m, cell = round(ds / 20 m) + 2. Vehicle 2
+    # (27.432 m behind): round(-1.37) = -1, cell 1; vehicle 3 (27.432 m ahead, left lane): cell 3;
+    # vehicle 4 (32.004 m ahead): round(1.6) = 2, cell 4, inside now; the ego (50 m behind, right
+    # lane): round(-2.5) = -2 (half to even), cell 0, inside too; vehicle 5 two lanes left: outside.
+    from diffsense.predictors import CSLSTM_SPEC
+
+    spec = dataclasses.replace(CSLSTM_SPEC, grid_cells=5, grid_cell_m=20.0)
+    scene = _grid_scene()
+    inputs = build_inputs(scene, ground_truth_detections(scene), jax.numpy.asarray([T0]), "hold", spec)
+    np.testing.assert_array_equal(np.asarray(inputs.nbr_weight[0]), [1.0, 1.0, 1.0, 1.0, 0.0])
+    # slot = grid lane (0 left, 1 own, 2 right) x 5 + cell
+    np.testing.assert_array_equal(np.asarray(inputs.nbr_slot[0])[:4], [2 * 5 + 0, 1 * 5 + 1, 0 * 5 + 3, 1 * 5 + 4])
