@@ -1,6 +1,6 @@
 """Detection as a physical probability: the smooth estimators against the reference E_ref.
 
-    nice -n 15 python benchmarks/bench_detection.py [--sensor radar] [--law-config PATH]
+    nice -n 15 python benchmarks/bench_detection.py [--sensor radar|camera|suite] [--law-config PATH]
         [--scenarios sc01] [--variants 1] [--points 10,20,30,45,60,90] [--draws 32]
         [--mc-samples 8] [--grid LO:HI:STEP ...] [--solve LO:HI ...] [--main-job] [--json PATH]
 
@@ -38,6 +38,23 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 LAWS = {"radar": ROOT / "configs/sensors/laws/radar_swerling1.toml",
         "camera": ROOT / "configs/sensors/laws/camera_confidence.toml"}
+# --sensor suite: the radar and the camera, each under its law above, fused; r is the radar's HFOV
+# (the camera keeps its default), and the reference draws each member on its own.
+SUITE_PARAM = "radar.hfov_deg"
+
+
+def _param(args) -> str:
+    return SUITE_PARAM if args.sensor == "suite" else "hfov_deg"
+
+
+def _law(args) -> str | None:
+    """The law TOML of --sensor (None for the suite, whose members take theirs from LAWS)."""
+    if args.sensor == "suite":
+        if args.law_config:
+            raise SystemExit("error: --law-config applies to one sensor; the suite's members use " +
+                             ", ".join(str(v) for v in LAWS.values()))
+        return None
+    return str(args.law_config or LAWS[args.sensor])
 
 
 def _problem(args, law_config, **changes):
@@ -47,6 +64,11 @@ def _problem(args, law_config, **changes):
     estimator = changes.pop("estimator", EstimatorConfig(kind="mean-field", reference_draws=args.draws))
     fields = dict(sensor=args.sensor, scenarios=args.scenarios.split(","), variants=args.variants,
                   sensor_config=law_config, estimator=estimator)
+    if args.sensor == "suite":
+        from diffsense.sensors import Camera, Radar
+
+        members = (Radar.from_toml(LAWS["radar"]), Camera.from_toml(LAWS["camera"]))
+        fields |= dict(sensor=members, sensor_config=None, params={SUITE_PARAM: (1.0, 180.0)})
     return ds.Problem(**(fields | changes))
 
 
@@ -58,7 +80,7 @@ def estimator_table(args) -> list[dict]:
 
     if not args.points:
         return []
-    law = str(args.law_config or LAWS[args.sensor])
+    law = _law(args)
     ev = Evaluator(ds.objective(_problem(args, law)))
     rr = Evaluator(ds.objective(_problem(args, law, estimator=EstimatorConfig(reference_draws=args.draws))))
     mc = None
@@ -90,7 +112,7 @@ def grid_agreement(args) -> list[dict]:
     from diffsense.metrics import EstimatorConfig
     from diffsense.solve import Evaluator
 
-    law = str(args.law_config or LAWS[args.sensor])
+    law = _law(args)
     ev = Evaluator(ds.objective(_problem(args, law)))
     smooth = {kind: Evaluator(ds.objective(_problem(args, law, estimator=EstimatorConfig(kind=kind, reference_draws=args.draws))))
               for kind in ("mean-field", "relaxed-reference")}
@@ -124,7 +146,7 @@ def seed_spread(args) -> list[dict]:
     from diffsense.metrics import EstimatorConfig
     from diffsense.solve import Evaluator
 
-    law = str(args.law_config or LAWS[args.sensor])
+    law = _law(args)
     points = [float(v) for v in args.points.split(",")]
     kinds = ("mean-field", "relaxed-reference", "mc")
     per_seed = {r: [] for r in points}
@@ -158,7 +180,7 @@ def temperature_sweep(args) -> list[dict]:
     from diffsense.metrics import EstimatorConfig
     from diffsense.solve import Evaluator
 
-    law = str(args.law_config or LAWS[args.sensor])
+    law = _law(args)
     unit = EstimatorConfig(kind="relaxed-reference", reference_draws=args.draws, reference_temperature=1.0)
     ev = Evaluator(ds.objective(_problem(args, law, estimator=unit)))  # tau is then the temperature
     out = []
@@ -181,11 +203,11 @@ def solve_against_brent(args) -> list[dict]:
     from diffsense.solve import Evaluator
     from scipy.optimize import minimize_scalar
 
-    law = str(args.law_config or LAWS[args.sensor])
+    law = _law(args)
     out = []
     for text in args.solve:
         lo, hi = (float(v) for v in text.split(":"))
-        problem = _problem(args, law, params={"hfov_deg": (lo, hi)}, estimator=EstimatorConfig(reference_draws=args.draws))
+        problem = _problem(args, law, params={_param(args): (lo, hi)}, estimator=EstimatorConfig(reference_draws=args.draws))
         E = ds.objective(problem)
         ev = Evaluator(E)
         grid = np.arange(lo, hi + 0.5, 1.0)
@@ -238,7 +260,7 @@ def main_job(args) -> list[dict]:
     from diffsense.solve import Evaluator
 
     out = []
-    for law in (None, str(args.law_config or LAWS[args.sensor])):
+    for law in (None, _law(args)):
         problem = ds.Problem(sensor=args.sensor, sensor_config=law)
         problem = dataclasses.replace(problem, estimator=dataclasses.replace(problem.estimator, reference_draws=args.draws))
         t0 = time.perf_counter()
@@ -256,7 +278,8 @@ def main_job(args) -> list[dict]:
 def problem_args(p: argparse.ArgumentParser) -> None:
     """The problem's options (sensor, law, scenarios, variants, reference draws), shared with
     bench_relaxation.py."""
-    p.add_argument("--sensor", default="radar", choices=sorted(LAWS))
+    p.add_argument("--sensor", default="radar", choices=[*sorted(LAWS), "suite"],
+                   help="suite: radar + camera under their laws, r the radar's HFOV")
     p.add_argument("--law-config", type=Path, help="sensor TOML with the probabilistic [detection] law")
     p.add_argument("--scenarios", default="sc01")
     p.add_argument("--variants", type=int, default=1)
@@ -279,6 +302,8 @@ def main() -> None:
     p.add_argument("--main-job", action="store_true")
     p.add_argument("--json", type=Path)
     args = p.parse_args()
+    if args.sensor == "suite" and args.main_job:
+        p.error("--main-job runs one sensor (the main job's radar or camera), not the suite")
     report = {"args": {k: str(v) for k, v in vars(args).items()}, "table": estimator_table(args)}
     if args.grid:
         report["grid"] = grid_agreement(args)

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_detection import LAWS, _problem, problem_args
+from bench_detection import _law, _param, _problem, problem_args
 
 
 def _ref_grid(ev, r):
@@ -94,7 +94,7 @@ def solves(args, seed, grids) -> list[dict]:
             best = float(min(known["E_ref"]))
         for lam in args.solve_temperatures:
             est = EstimatorConfig(reference_draws=args.draws, reference_temperature=lam)
-            problem = _problem(args, args.law, seed=seed, params={"hfov_deg": (lo, hi)}, estimator=est)
+            problem = _problem(args, args.law, seed=seed, params={_param(args): (lo, hi)}, estimator=est)
             t0 = time.perf_counter()
             result = ds.optimise(problem, figures=False)
             ref = result.reference
@@ -119,7 +119,7 @@ def main() -> None:
     p.add_argument("--solve-temperatures", default="0.01", help="lambda [logit units] of the solves; '' for none")
     p.add_argument("--json", type=Path)
     args = p.parse_args()
-    args.law = str(args.law_config or LAWS[args.sensor])
+    args.law = _law(args)
     args.temperatures = [float(v) for v in args.temperatures.split(",") if v]
     args.solve_temperatures = [float(v) for v in args.solve_temperatures.split(",") if v]
     report = {"args": {k: str(v) for k, v in vars(args).items()}, "agreement": [], "solve": []}

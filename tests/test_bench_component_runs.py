@@ -30,3 +30,13 @@ def test_bench_sensor_runs():
     text = _run("benchmarks/bench_sensor.py", "--variants", "2", "--repeats", "1")
     rows = [line for line in text.splitlines() if line.startswith(("radar ", "camera "))]
     assert len(rows) == 12 and all(row.split()[-1] in ("ok", "MISSED") for row in rows), text
+
+
+@pytest.mark.slow
+def test_bench_detection_runs_a_suite():
+    # The suite (radar + camera under their probabilistic laws, r the radar's HFOV): E_ref with
+    # its standard error and the estimators beside it, one point, 2 draws.
+    text = _run("benchmarks/bench_detection.py", "--sensor", "suite", "--points", "20", "--draws", "2",
+                "--mc-samples", "0")
+    row = next(line for line in text.splitlines() if line.startswith("r   20.00"))
+    assert "E_ref" in row and "mean_field" in row and "relaxed_reference" in row, text
