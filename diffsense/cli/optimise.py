@@ -132,7 +132,7 @@ def _number_list(text: str, what: str) -> tuple[float, ...]:
 def problems(args: argparse.Namespace) -> list:
     """The `diffsense.Problem` of each sensor the flags ask for, every input checked."""
     from diffsense import Problem
-    from diffsense._problem import load_settings, problem_fields
+    from diffsense._settings import load_settings, problem_fields
     from diffsense._suite_file import checked
     from diffsense.config import to_dict
     from diffsense.metrics import EstimatorConfig
