@@ -2,7 +2,7 @@
 
     nice -n 10 python benchmarks/bench_relaxation.py [--sensor radar] [--grid LO:HI:STEP ...]
         [--temperatures 0.01,0.003,0.001,0.0001] [--seeds 0] [--solve LO:HI ...]
-        [--solve-temperatures 0.01,0.001] [--json PATH]
+        [--solve-temperatures 0.01,0.001] [--tau-schedule 4,2,1] [--json PATH]
 
 For each seed (scene variants, measurement noise and the reference's uniforms), on the problem of
 `bench_detection.py` (sc01, 1 variant, the sensor's probabilistic law, K = --draws):
@@ -22,6 +22,7 @@ For each seed (scene variants, measurement noise and the reference's uniforms), 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -95,10 +96,14 @@ def solves(args, seed, grids) -> list[dict]:
         for lam in args.solve_temperatures:
             est = EstimatorConfig(reference_draws=args.draws, reference_temperature=lam)
             problem = _problem(args, args.law, seed=seed, params={_param(args): (lo, hi)}, estimator=est)
+            if args.tau_schedule:
+                schedule = tuple(float(v) for v in args.tau_schedule.split(","))
+                problem = dataclasses.replace(problem, solve=dataclasses.replace(problem.solve, tau_schedule=schedule))
             t0 = time.perf_counter()
             result = ds.optimise(problem, figures=False)
             ref = result.reference
-            row = {"seed": seed, "interval": text, "lambda": lam, "grid_best_E_ref": best,
+            row = {"seed": seed, "interval": text, "lambda": lam, "tau_schedule": list(problem.solve.tau_schedule),
+                   "grid_best_E_ref": best,
                    "r_star": next(iter(result.r_star.values())), "E_ref_star": ref["E_ref_star"],
                    "E_ref_star_se": ref["E_ref_star_se"], "rel_to_grid_best": ref["E_ref_star"] / best - 1.0,
                    "sweep_steps": len(result.sweep), "objective": result.evaluations["objective"],
@@ -117,6 +122,8 @@ def main() -> None:
     p.add_argument("--seeds", default="0")
     p.add_argument("--solve", action="append", default=[], metavar="LO:HI", help="solve interval [deg] (repeatable)")
     p.add_argument("--solve-temperatures", default="0.01", help="lambda [logit units] of the solves; '' for none")
+    p.add_argument("--tau-schedule", default="",
+                   help="the solves' continuation, multipliers of lambda, largest first (default: the config's)")
     p.add_argument("--json", type=Path)
     args = p.parse_args()
     args.law = _law(args)
