@@ -235,37 +235,60 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         from diffsense._suite_solve import optimise_box
 
         return optimise_box(problem, E, predictor, say, on_evaluation)
+    out, E = _optimise_line(problem, E, predictor, figures, say, on_evaluation)
+    if sensitivity:
+        from diffsense._sensitivity import sensitivity as implicit
+
+        say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)} (implicit function theorem)")
+        out = dataclasses.replace(out, sensitivity=implicit(problem, out, sensitivity, E=E))
+    return out
+
+
+def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progress,
+               on_evaluation: Callable[[dict], None] | None) -> tuple[Objective, Evaluator]:
+    """The problem's objective (built unless given) and its memoising, counting evaluator."""
+    say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
+        "ground-truth predictions")
+    E = objective(problem, predictor=predictor) if E is None else E
+    planned = planned_evaluations(problem)
+
+    def counted(kind: str, e_m: float, tau: float) -> None:
+        if on_evaluation is not None:
+            on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": sum(ev.counts.values()), "planned": planned})
+
+    ev = Evaluator(E, progress=counted)
+    return E, ev
+
+
+def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
+    """The sweep and the continuous solve (the inner hard grid for the hard estimator) of a
+    one-parameter problem, the answer judged on E_hard or, under a probabilistic law, E_ref."""
+    (_, (lo, hi)), = problem.params.items()
+    if problem.estimator.kind == "hard":
+        return hard_grid_solve(ev.e_hard, (lo, hi), steps=problem.steps, max_evaluations=problem.solve.max_evaluations)
+    e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
+    # Under a probabilistic detection law the sweep, the answer and the polish are judged on
+    # E_ref, the expectation the estimator approximates; under the threshold law E_ref is E_hard.
+    e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
+    return solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
+                 value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref")
+
+
+def _optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures: bool, say: Progress,
+                   on_evaluation: Callable[[dict], None] | None) -> tuple[Result, Objective]:
+    """`optimise` of a one-parameter problem (its docstring), and the objective it built or was given."""
     (name, (lo, hi)), = problem.params.items()
     spec = problem.specs()[name]
     hard_only = problem.estimator.kind == "hard"
     with CompileClock() as clock:
-        say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
-            "ground-truth predictions")
-        E = objective(problem, predictor=predictor) if E is None else E
-        planned = planned_evaluations(problem)
-
-        def counted(kind: str, e_m: float, tau: float) -> None:
-            if on_evaluation is not None:
-                on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": sum(ev.counts.values()), "planned": planned})
-
-        ev = Evaluator(E, progress=counted)
+        E, ev = _evaluator(problem, E, predictor, say, on_evaluation)
         on_hard = hard_only or is_deterministic(E.sensor)
         domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
         if domain_note(domain):
             say("warning: " + domain_note(domain))
         say(f"{problem.sensor_kind}: stepped sweep and {'hard grid' if hard_only else 'continuous solve'} "
             f"of {name} over [{lo:g}, {hi:g}] {spec.unit}")
-        if hard_only:
-            result = hard_grid_solve(ev.e_hard, (lo, hi), steps=problem.steps,
-                                     max_evaluations=problem.solve.max_evaluations)
-        else:
-            e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
-            # Under a probabilistic detection law the sweep, the answer and the polish are judged
-            # on E_ref, the expectation the estimator approximates; under the threshold law E_ref
-            # is E_hard.
-            e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
-            result = solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
-                           value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref")
+        result = _solve_line(ev, problem, on_hard)
         solve_counts = dict(ev.counts)
         say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, "
             f"{'E_hard' if on_hard else 'E_ref'}(r*) = {result.E_hard_star:.4f} m")
@@ -292,9 +315,4 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         config=_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
         flags=tuple(answer["flags"]), domain=domain, reference=_reference_summary(ev, problem, result.r_star, on_hard),
         **parts)
-    if sensitivity:
-        from diffsense._sensitivity import sensitivity as implicit
-
-        say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)} (implicit function theorem)")
-        out = dataclasses.replace(out, sensitivity=implicit(problem, out, sensitivity, E=E))
-    return out
+    return out, E
