@@ -234,6 +234,17 @@ def train(
 
     params = fold_position_scale(params, scale)
     fut = _validate(predict, params, val_set, cfg.run.val_batch_size)
+    card = _model_card(cfg, params, fut, train_set, val_set, meta, total, epochs, wall, history)
+    from diffsense.predictors._weights import save_weights
+
+    save_weights(cfg.run.weights, nnx.merge(graphdef, params), card)
+    return card
+
+
+def _model_card(cfg: TrainConfig, params, fut, train_set, val_set, meta: dict, total: int, epochs: int,
+                wall: float, history: list[dict]) -> dict:
+    """The model card of a finished run: what was trained on what, and how it validates against
+    constant velocity (`fut`: the trained model's predictions of the validation set)."""
     cv = constant_velocity_m(val_set.hist_m, cfg.data.cv_points)
     card = {
         "model": "CS-LSTM (Deo & Trivedi 2018), " + ("manoeuvre-based decoder" if cfg.maneuvers else "single-mode decoder"),
@@ -269,7 +280,4 @@ def train(
         "machine": {"platform": jax.default_backend(), "device": jax.devices()[0].device_kind,
                     "cpu_count": os.cpu_count()},
     }
-    from diffsense.predictors._weights import save_weights
-
-    save_weights(cfg.run.weights, nnx.merge(graphdef, params), card)
     return card
