@@ -134,8 +134,6 @@ def problems(args: argparse.Namespace) -> list:
     from diffsense import Problem
     from diffsense._settings import load_settings, problem_fields
     from diffsense._suite_file import checked
-    from diffsense.config import to_dict
-    from diffsense.metrics import EstimatorConfig
     from diffsense.solve import check_steps
 
     settings = load_settings(args.config)
@@ -160,45 +158,55 @@ def problems(args: argparse.Namespace) -> list:
                 raise InputError("a suite needs its parameters as --param NAME=LO:HI (e.g. radar.hfov_deg=20:120)")
         else:
             fields = problem_fields(settings, sensor, single, tuple(args.interval) if args.interval else None)
-        if suite:
-            fields["cost_weight"] = suite["cost_weight"]
-        if args.cost_weight is not None:
-            fields["cost_weight"] = args.cost_weight
-        if args.scenarios is not None:
-            fields["scenarios"] = args.scenarios
-        if args.scenes is not None:
-            fields["scenes"] = args.scenes
-        for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed"),
-                          ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"), ("predictor_dtype", "predictor_dtype"),
-                          ("profile", "profile"), ("sensor_config", "sensor_config"),
-                          ("traffic_speed_offset_kmh", "traffic_speed_offset_kmh")):
-            if getattr(args, flag) is not None:
-                fields[key] = getattr(args, flag)
-        estimator = to_dict(settings.problem.estimator)
-        if args.estimator:
-            estimator["kind"] = args.estimator
-        if args.mc_samples is not None:
-            estimator["samples"] = args.mc_samples
-        fields["estimator"] = EstimatorConfig(**estimator)
-        if args.tau is not None:
-            if not (math.isfinite(args.tau) and args.tau > 0):
-                raise InputError(f"--tau must be a positive number, got {args.tau}")
-            # The continuation keeps its shape and ends at the requested temperature.
-            taus = settings.solve.tau_schedule
-            fields["solve"] = dataclasses.replace(settings.solve, tau_schedule=tuple(t * args.tau / taus[-1] for t in taus))
-        if args.steps:
-            fields["steps"] = _number_list(args.steps, "--steps")
-        fields["dense_check"] = args.dense_check
-        weather = {k: v for k, v in (("rain_mm_h", args.rain_mm_h), ("fog_visibility_m", args.fog_visibility_m))
-                   if v is not None}
-        if weather:
-            fields["weather"] = weather
+        fields.update(_flag_fields(args, settings, suite))
         problem = checked(args.suite, lambda: Problem(**fields)) if suite else Problem(**fields)
         if problem.steps is not None:
             (lo, hi), = problem.params.values()
             check_steps(problem.steps, lo, hi)
         out.append(problem)
     return out
+
+
+def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict:
+    """The `Problem` fields the flags set over the config's (every sensor's problem alike)."""
+    from diffsense.config import to_dict
+    from diffsense.metrics import EstimatorConfig
+
+    fields: dict = {}
+    if suite:
+        fields["cost_weight"] = suite["cost_weight"]
+    if args.cost_weight is not None:
+        fields["cost_weight"] = args.cost_weight
+    if args.scenarios is not None:
+        fields["scenarios"] = args.scenarios
+    if args.scenes is not None:
+        fields["scenes"] = args.scenes
+    for flag, key in (("variants", "variants"), ("model", "predictor"), ("fill", "fill"), ("seed", "seed"),
+                      ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"), ("predictor_dtype", "predictor_dtype"),
+                      ("profile", "profile"), ("sensor_config", "sensor_config"),
+                      ("traffic_speed_offset_kmh", "traffic_speed_offset_kmh")):
+        if getattr(args, flag) is not None:
+            fields[key] = getattr(args, flag)
+    estimator = to_dict(settings.problem.estimator)
+    if args.estimator:
+        estimator["kind"] = args.estimator
+    if args.mc_samples is not None:
+        estimator["samples"] = args.mc_samples
+    fields["estimator"] = EstimatorConfig(**estimator)
+    if args.tau is not None:
+        if not (math.isfinite(args.tau) and args.tau > 0):
+            raise InputError(f"--tau must be a positive number, got {args.tau}")
+        # The continuation keeps its shape and ends at the requested temperature.
+        taus = settings.solve.tau_schedule
+        fields["solve"] = dataclasses.replace(settings.solve, tau_schedule=tuple(t * args.tau / taus[-1] for t in taus))
+    if args.steps:
+        fields["steps"] = _number_list(args.steps, "--steps")
+    fields["dense_check"] = args.dense_check
+    weather = {k: v for k, v in (("rain_mm_h", args.rain_mm_h), ("fog_visibility_m", args.fog_visibility_m))
+               if v is not None}
+    if weather:
+        fields["weather"] = weather
+    return fields
 
 
 def _check_inputs(problems_: list) -> None:
