@@ -91,8 +91,8 @@ def test_recorded_scenes_are_one_clear_scenario_each(tmp_path):
 
 
 def test_float32_scenes_make_a_float32_objective():
-    """With x64 on, float32 scenes keep every float of the objective's data in float32 (the
-    weights, the true future, the Monte-Carlo uniforms, the weather) and the scenario ids int32."""
+    """With x64 on, float32 scenes keep every float of the objective in float32 (the weights, the
+    true future, the Monte-Carlo uniforms, the weather, r and E) and the scenario ids int32."""
     jax.config.update("jax_enable_x64", True)
     scenes, scenario = toy_scenes(2)
     scenes = jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a,
@@ -104,3 +104,5 @@ def test_float32_scenes_make_a_float32_objective():
     for name in ("weight", "true_fut", "mc_uniform"):
         assert getattr(E.data, name).dtype == jnp.float32, name
     assert {leaf.dtype for leaf in jax.tree.leaves(E.weather)} == {jnp.dtype(jnp.float32)}
+    # r given as Python floats is taken in the objective's dtype: E(r) stays float32
+    assert E({"range_m": 40.0}).dtype == jnp.float32
