@@ -1,0 +1,110 @@
+"""The solver's wrapper of an objective (`diffsense/solve/_evaluator.py`) on a bowl worked by hand,
+and its breakdown of the toy objective against a numpy recomputation.
+
+The bowl: E_soft^2(x, tau) = (x - 3)^2 + tau / 4 [m^2], E_hard^2(x) = (x - 3)^2 + 1/4, so
+E_hard(3) = 0.5 m, E_soft^2(4, 1) = 1.25 with gradient 2, E_soft^2(4, 2) = 1.5.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense.metrics import ReferenceEvaluation
+from diffsense.sensors import Radar
+from diffsense.solve import Evaluator
+from diffsense.solve._box_fns import BoxFunctions
+from tests._toy_pipeline import toy_objective
+
+
+class _Hard(NamedTuple):
+    e2: jax.Array
+    objective: jax.Array
+
+
+class Bowl(eqx.Module):
+    """An objective's interface with the bowl's numbers; its reference is E_hard plus 1 m."""
+
+    names: tuple[str, ...] = eqx.field(static=True, default=("range_m",))
+
+    @property
+    def dtype(self):
+        return jnp.float64
+
+    def point(self, v):
+        return v[0]
+
+    def e2(self, x, tau):
+        return (x - 3.0) ** 2 + tau / 4.0
+
+    def hard(self, x):
+        e2 = (x - 3.0) ** 2 + 0.25
+        return _Hard(e2=e2, objective=e2)
+
+    def reference(self, x):
+        e = jnp.sqrt((x - 3.0) ** 2 + 0.25) + 1.0
+        zero = jnp.zeros_like(e)
+        return ReferenceEvaluation(e2=e * e, e2_se=zero, e=e, e_se=zero, draws=(e * e)[None])
+
+
+class DeterministicBowl(Bowl):
+    """The bowl with a threshold-law sensor: its reference is its hard evaluation."""
+
+    sensor: Radar = eqx.field(static=True, default_factory=Radar.from_toml)
+
+
+@pytest.fixture(autouse=True)
+def _x64():
+    jax.config.update("jax_enable_x64", True)
+
+
+def test_soft_values_memoised_at_tau_one_by_default():
+    ev = Evaluator(Bowl())
+    v, g = ev.value_and_grad(4.0)
+    assert (v, float(g[0])) == (1.25, 2.0)
+    assert ev.e2_soft(4.0) == 1.25 and ev.e2_soft(4.0, 2.0) == 1.5
+    assert ev.counts["soft"] == 2  # (4, 1) asked three times, (4, 2) once
+
+
+def test_hard_value_and_progress_report_e_not_e_squared():
+    seen = []
+    ev = Evaluator(Bowl(), progress=lambda kind, value, tau: seen.append((kind, value, tau)))
+    assert ev.e_hard(3.0) == 0.5
+    assert seen == [("hard", 0.5, 0.0)]
+
+
+def test_reference_of_a_random_and_of_a_deterministic_objective():
+    assert Evaluator(Bowl()).e_reference(3.0) == pytest.approx(1.5, abs=1e-12)
+    ev = Evaluator(DeterministicBowl())
+    ref = ev.reference(5.0)  # (5 - 3)^2 + 1/4 = 4.25: E_ref = sqrt(4.25), from the hard pass
+    assert float(ref.e2) == 4.25 and float(ref.e) == pytest.approx(np.sqrt(4.25), abs=1e-12)
+    assert ev.e_reference(5.0) == pytest.approx(np.sqrt(4.25), abs=1e-12) and ev.reference_count == 0
+
+
+def test_solver_fns_reach_the_compiled_program_through_a_callback():
+    e2_soft, e_hard = Evaluator(Bowl()).solver_fns()
+    v, g = jax.jit(jax.value_and_grad(e2_soft))(4.0, 2.0)
+    assert (float(v), float(g)) == (1.5, 2.0)
+    assert e_hard(3.0) == 0.5
+
+
+def test_box_functions_from_an_evaluator_keep_the_cost():
+    fns = BoxFunctions.from_evaluator(Evaluator(Bowl()), cost=lambda r: 2.0 * r["range_m"] + 1.0)
+    c, gc = fns.cost(np.array([4.0]))
+    assert c == 9.0 and gc.tolist() == [2.0]
+    assert fns.j_hard(np.array([3.0]), 0.5) == (0.5 + 0.5 * 7.0, 0.5, 7.0)
+
+
+def test_breakdown_by_scenario_against_numpy():
+    E = toy_objective(n=2, instants=2)  # variant 0 is scenario0, variant 1 scenario1
+    ev = Evaluator(E)
+    out = ev.breakdown(42.0)
+    sq = np.asarray(ev.hard(42.0).sq_instant, np.float64)  # [N, I]
+    for k, name in enumerate(("scenario0", "scenario1")):
+        assert out["by_scenario"][name]["E_hard"] == pytest.approx(np.sqrt(sq[k].mean()), rel=1e-9)
+    assert out["E_hard"] == pytest.approx(np.sqrt(sq.mean()), rel=1e-9)
