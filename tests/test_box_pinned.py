@@ -45,7 +45,8 @@ def test_box_solve_turns_float64_on():
         jax.config.update("jax_enable_x64", True)
 
 
-def test_bracketed_secant_first_probe_is_a_quarter_of_the_bracket():
+def _secant_points(**options):
+    """The points g(y) = y - 6 is asked at by the secant on [0, 8] from 0.5, and the answer."""
     jax.config.update("jax_enable_x64", True)
     asked = []
 
@@ -54,7 +55,15 @@ def test_bracketed_secant_first_probe_is_a_quarter_of_the_bracket():
         return y - 6.0
 
     sol = optx.root_find(g, BracketedSecant(rtol=0.0, atol=1e-6), jnp.asarray(0.5),
-                         options=dict(lower=0.0, upper=8.0), max_steps=20)
+                         options=dict(lower=0.0, upper=8.0, **options), max_steps=20, throw=False)
     jax.effects_barrier()
-    assert asked == [0.5, 2.5, 7.75, 6.0]
-    assert float(sol.value) == 6.0
+    return asked, float(sol.value)
+
+
+def test_bracketed_secant_first_probe_is_a_quarter_of_the_bracket():
+    assert _secant_points() == ([0.5, 2.5, 7.75, 6.0], 6.0)
+
+
+def test_bracketed_secant_stops_after_max_evaluations():
+    asked, _ = _secant_points(max_evaluations=2)
+    assert asked == [0.5, 2.5]

@@ -288,3 +288,13 @@ def test_result_reports_its_schedule_interval_and_wall_times():
     assert res.tau_schedule == (3.0, 1.5) and res.interval == (LO, HI)
     assert set(res.wall_s) == {"sweep", "solve"} and min(res.wall_s.values()) >= 0.0
     assert res.wall_s["sweep"] + res.wall_s["solve"] <= elapsed
+
+
+def test_an_empty_interval_is_refused():
+    """lo < hi strictly: [3, 3] holds no r to choose (kills `lo <= hi` in check_interval)."""
+    from diffsense.solve._steps import check_interval
+
+    assert check_interval(3, 4) == (3.0, 4.0)
+    for lo, hi in ((3.0, 3.0), (4.0, 3.0)):
+        with pytest.raises(InputError, match="LO must be smaller than HI"):
+            check_interval(lo, hi)
