@@ -99,24 +99,15 @@ def _idm_towards(speed, own_len, p: IDMParams, lead_dist, lead_len, lead_speed, 
     return accel + jnp.maximum(-p.comfort_decel_mps2 - free_road, 0.0)
 
 
-def traffic_step(
-    cfg: TrafficConfig, vehicles: TrafficVehicles, state: TrafficState, key: PRNGKeyArray
-) -> TrafficState:
-    """Advance one simulation by one 0.1 s step."""
+def _lane_change_starts(cfg: TrafficConfig, vehicles: TrafficVehicles, state: TrafficState, idm, accel, accel_r,
+                        neighbours) -> tuple[Array, Array]:
+    """Which vehicles start a lane change this step, and every vehicle's target lane [V] (MOBIL
+    per side, then two close starters whose lanes would overlap resolved to the lower index)."""
     lc = cfg.lane_change
-    dtype = state.s_m.dtype
     num_v = state.s_m.shape[0]
     v, length = state.speed_mps, vehicles.length_m
-    idm = dataclasses.replace(vehicles.idm, desired_speed_mps=state.desired_speed_mps)
-    leader, lead_dist, has_lead, follower, foll_dist, has_foll, ahead = _neighbours(state, vehicles)
-
-    # Longitudinal: IDM towards the leader of each relative lane; a vehicle obeys every lane it occupies.
-    idm_r = jax.tree_util.tree_map(lambda a: a[:, None], idm)
-    accel_r = _idm_towards(v[:, None], length[:, None], idm_r, lead_dist, length[leader], v[leader], has_lead)
+    leader, lead_dist, has_lead, follower, foll_dist, has_foll, ahead = neighbours
     changing = state.target_lane != state.lane
-    to_r = jnp.clip(state.target_lane - state.lane + 1, 0, 2)
-    accel = jnp.minimum(accel_r[:, _OWN], jnp.take_along_axis(accel_r, to_r[:, None], axis=1)[:, 0])
-
     # Lateral decision (MOBIL) for vehicles in a lane, out of their cool-down.
     ready = ~changing & (state.since_change_s >= state.change_duration_s + lc.cooldown_s)
     old_f, has_old_f = follower[:, _OWN], has_foll[:, _OWN]
@@ -165,6 +156,28 @@ def traffic_step(
     blocked = jnp.any(starts[None, :] & close & share & (jnp.arange(num_v)[None, :] < jnp.arange(num_v)[:, None]), axis=1)
     starts &= ~blocked
     new_target = jnp.where(starts, new_target, state.target_lane)
+    return starts, new_target
+
+
+def traffic_step(
+    cfg: TrafficConfig, vehicles: TrafficVehicles, state: TrafficState, key: PRNGKeyArray
+) -> TrafficState:
+    """Advance one simulation by one 0.1 s step."""
+    lc = cfg.lane_change
+    dtype = state.s_m.dtype
+    num_v = state.s_m.shape[0]
+    v, length = state.speed_mps, vehicles.length_m
+    idm = dataclasses.replace(vehicles.idm, desired_speed_mps=state.desired_speed_mps)
+    neighbours = _neighbours(state, vehicles)
+    leader, lead_dist, has_lead = neighbours[:3]
+
+    # Longitudinal: IDM towards the leader of each relative lane; a vehicle obeys every lane it occupies.
+    idm_r = jax.tree_util.tree_map(lambda a: a[:, None], idm)
+    accel_r = _idm_towards(v[:, None], length[:, None], idm_r, lead_dist, length[leader], v[leader], has_lead)
+    to_r = jnp.clip(state.target_lane - state.lane + 1, 0, 2)
+    accel = jnp.minimum(accel_r[:, _OWN], jnp.take_along_axis(accel_r, to_r[:, None], axis=1)[:, 0])
+
+    starts, new_target = _lane_change_starts(cfg, vehicles, state, idm, accel, accel_r, neighbours)
 
     u = jax.random.uniform(key, (5, num_v), dtype)
     duration = jnp.where(starts, lc.duration_s[0] + u[0] * (lc.duration_s[1] - lc.duration_s[0]), state.change_duration_s)
