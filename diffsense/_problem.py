@@ -17,7 +17,7 @@ from typing import Any
 from diffsense.errors import InputError
 from diffsense.metrics import PAPER_SCENARIOS, QUESTIONS, EstimatorConfig
 from diffsense.predictors import COMPUTE_DTYPES, Predictor
-from diffsense.sensors import Sensor, make_sensor
+from diffsense.sensors import Sensor, Suite, make_sensor
 from diffsense.sensors._params import ParamSpec
 from diffsense.solve import BoxConfig, SolveConfig
 from diffsense.tracks import FILL_POLICIES
@@ -45,7 +45,9 @@ class Problem:
             implementing `diffsense.predictors.Predictor`.
         profile: the sensors' shipped constants: "physical" (the default) or "paper" (the
             paper's experimental design: see configs/sensors/paper/).
-        sensor_config: a TOML of sensor constants (any subset) replacing the profile's.
+        sensor_config: a TOML of sensor constants (any subset) replacing the profile's; for a
+            suite, {member name: TOML} (e.g. {"radar": "radar_swerling1.toml"}), members not
+            named keeping their profile's.
         fill: missing-detection policy: "zero", "hold" or "interp" (None: the profile's, "hold"
             for physical, the paper's "zero" for paper).
         estimator: how detection uncertainty enters ("auto", "mean-field", "mc",
@@ -85,7 +87,7 @@ class Problem:
     seed: int = 0
     predictor: str | Predictor = ""
     profile: str = "physical"
-    sensor_config: str | None = None
+    sensor_config: str | Mapping[str, str] | None = None
     fill: str | None = None
     estimator: str | EstimatorConfig = "auto"
     prediction_stride_frames: int = 4
@@ -168,6 +170,8 @@ class Problem:
 
     def make_sensor(self) -> Sensor:
         """The sensor with the problem's profile and sensor config."""
+        if isinstance(self.sensor_config, Mapping):
+            return _suite_with_configs(self.sensor, self.sensor_config, self.profile)
         return make_sensor(self.sensor, self.sensor_config, self.profile)
 
     @property
@@ -218,6 +222,21 @@ def _weather(weather: Mapping[str, Any] | None) -> dict[str, float]:
             raise InputError(f"weather {name} = {value!r} is outside [{lo:g}, {hi:g}]")
         out[name] = v
     return out
+
+
+def _suite_with_configs(sensor: Any, configs: Mapping[str, str], profile: str) -> Sensor:
+    """A suite whose members named in `configs` take the constants of their TOML."""
+    if not isinstance(sensor, tuple) or len(sensor) < 2:
+        raise InputError("a sensor_config by member name is for a suite (two or more sensors); give one sensor a path")
+    names = [s if isinstance(s, str) else s.kind for s in sensor]
+    for name, path in configs.items():
+        if name not in names:
+            raise InputError(f"sensor_config names {name!r}, not a member of the suite ({', '.join(names)})")
+        if not isinstance(sensor[names.index(name)], str):
+            raise InputError(f"sensor_config for {name!r}: that member is a Sensor object, which carries its own constants")
+        if not isinstance(path, (str, Path)):
+            raise InputError(f"sensor_config for {name!r} must be a TOML path, got {path!r}")
+    return Suite([make_sensor(s, configs.get(s), profile) if isinstance(s, str) else s for s in sensor])
 
 
 def _check_int(name: str, value: Any, lo: int, hi: int) -> None:

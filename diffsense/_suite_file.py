@@ -6,6 +6,8 @@
     [params]                                # the free parameters, qualified by the member, and bounds
     "radar.hfov_deg" = [20.0, 120.0]
     "camera.width_px" = [640.0, 3840.0]
+    [sensor_config]                         # optional: a member's constants from a TOML, the path
+    radar = "../sensors/laws/radar_swerling1.toml"   # relative to this file (`Problem.sensor_config`)
 
 `ds.Problem.from_suite(path)` and `python -m diffsense.optimise --suite FILE` read it. Nothing else
 is accepted: an unknown key or a value of the wrong type is refused in one line naming the file,
@@ -23,7 +25,7 @@ from typing import Any, TypeVar
 
 from diffsense.errors import InputError
 
-_KEYS = ("sensors", "cost_weight", "description", "params")
+_KEYS = ("sensors", "cost_weight", "description", "params", "sensor_config")
 T = TypeVar("T")
 
 
@@ -57,9 +59,25 @@ def _params(path: Path, table: Any) -> dict[str, tuple[float, float]]:
     return out
 
 
+def _sensor_config(path: Path, table: Any) -> dict[str, str]:
+    """[sensor_config]: member name -> TOML path, resolved against the suite file's folder."""
+    if not isinstance(table, dict) or not table:
+        raise _fail(path, "[sensor_config] must be a table of member name = \"TOML path\", e.g. radar = \"radar.toml\"")
+    out = {}
+    for name, value in table.items():
+        if not (isinstance(value, str) and value):
+            raise _fail(path, f"sensor_config {name} must be a TOML path (a string), got {value!r}")
+        config = path.parent / value
+        if not config.is_file():
+            raise _fail(path, f"sensor_config {name}: {config} is not a file")
+        out[name] = str(config)
+    return out
+
+
 def load_suite(path: str | Path) -> dict[str, Any]:
-    """The `Problem` fields a suite file gives: {"sensor", "params", "cost_weight"}, each value's
-    type checked (the values themselves are checked by `Problem`)."""
+    """The `Problem` fields a suite file gives: {"sensor", "params", "cost_weight"} and, when it
+    has one, "sensor_config", each value's type checked (the values themselves are checked by
+    `Problem`)."""
     path = Path(path)
     data = _read(path)
     unknown = [k for k in data if k not in _KEYS]
@@ -75,7 +93,10 @@ def load_suite(path: str | Path) -> dict[str, Any]:
         raise _fail(path, f"cost_weight must be a finite number, got {cost_weight!r}")
     if not isinstance(data.get("description", ""), str):
         raise _fail(path, f"description must be a string, got {data['description']!r}")
-    return {"sensor": list(sensors), "params": _params(path, data["params"]), "cost_weight": float(cost_weight)}
+    fields = {"sensor": list(sensors), "params": _params(path, data["params"]), "cost_weight": float(cost_weight)}
+    if "sensor_config" in data:
+        fields["sensor_config"] = _sensor_config(path, data["sensor_config"])
+    return fields
 
 
 def checked(path: str | Path, build: Callable[[], T]) -> T:

@@ -25,7 +25,7 @@ from diffsense._problem import Problem
 from diffsense._result import Result
 from diffsense._timing import CompileClock
 from diffsense.errors import InputError
-from diffsense.metrics import Objective
+from diffsense.metrics import Objective, is_deterministic
 from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, pareto_sweep
 
 # The cost weights a front is traced at by default [m per currency unit]: from E alone (0) to
@@ -42,7 +42,10 @@ def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, plan
     from diffsense.metrics._cost import load_costs, make_cost
 
     ev = Evaluator(E)
-    fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.costs), E.sensor))
+    # Under a probabilistic detection law answers are judged on E_ref, the expectation the
+    # estimator approximates (as the one-parameter solve does); under the threshold law it is E_hard.
+    e_answer = None if _on_hard(problem, E) else ev.e_reference
+    fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.costs), E.sensor), e_answer=e_answer)
     if on_evaluation is not None:
         def listen(event) -> None:  # what a progress display shows: E, the cost there, the count
             done = sum(fns.counts.values())
@@ -55,6 +58,11 @@ def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, plan
     return ev, fns, start
 
 
+def _on_hard(problem: Problem, E: Objective) -> bool:
+    """Whether answers are judged on E_hard (the threshold law, or the hard estimator) or on E_ref."""
+    return problem.estimator.kind == "hard" or is_deterministic(E.sensor)
+
+
 def _planned(problem: Problem, solves: int = 1) -> int:
     return solves * problem.box.max_soft + (problem.box.samples or 2 * len(problem.params) + 2)
 
@@ -63,7 +71,7 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     """Many parameters (or a cost): the box solve (`diffsense.solve.box_solve`): a coarse hard
     sample, BFGS with temperature continuation from its best points, every answer checked on the
     hard objective J = E_hard + cost_weight * cost."""
-    from diffsense._optimise import _config, objective
+    from diffsense._optimise import _config, _reference_summary, objective
 
     with CompileClock() as clock:
         say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
@@ -81,7 +89,8 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         notes += (domain_note(domain),)
     return Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={n: s.unit for n, s in problem.specs().items()},
-        r_star=dict(box.x_star), E_hard_star=float(box.E_hard), E_soft_star=float(box.E_soft), solve=None, box=box,
+        r_star=dict(box.x_star), E_hard_star=ev.e_hard(x), E_soft_star=float(box.E_soft), solve=None, box=box,
+        reference=_reference_summary(ev, problem, x, _on_hard(problem, E)),
         programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
         scenarios=tuple(E.scenario_names), config=_config(problem), domain=domain, box_notes=notes, **parts)

@@ -29,6 +29,23 @@ def test_the_shipped_suites_load_alike_from_the_api_and_the_cli(name, d):
     assert heavier.cost_weight == 0.01  # the flag replaces the file's weight
 
 
+def test_a_suite_file_gives_members_their_own_constants(tmp_path):
+    # The shipped suite under the probabilistic laws: paths relative to the file, one TOML per member.
+    path = SUITES / "radar_camera_laws_d2.toml"
+    problem = ds.Problem.from_suite(path, variants=1)
+    laws = [m.config.detection.law for m in problem.make_sensor().members]
+    assert laws == ["swerling1", "confidence"] and problem.cost_weight == 0.0
+    assert all(Path(p).is_file() for p in problem.sensor_config.values())
+    (cli,) = problems(_parser().parse_args(["--suite", str(path), "--variants", "1"]))
+    assert cli.sensor_config == problem.sensor_config and cli.params == problem.params
+    # A copy elsewhere reads its configs beside itself: a member left out keeps its profile's.
+    (tmp_path / "laws").mkdir()
+    (tmp_path / "laws" / "r.toml").write_text((ROOT / "configs/sensors/laws/radar_swerling1.toml").read_text())
+    (tmp_path / "s.toml").write_text(GOOD + '[sensor_config]\nradar = "laws/r.toml"\n')
+    radar, camera = ds.Problem.from_suite(tmp_path / "s.toml").make_sensor().members
+    assert radar.config.detection.law == "swerling1" and camera.config.detection.law == "threshold"
+
+
 def test_the_mounted_suite_frees_every_sensors_mounting():
     problem = ds.Problem.from_suite(SUITES / "radar_camera_mounted_d14.toml")
     assert {f"{s}.{m}" for s in ("radar", "camera") for m in ds.sensors.MOUNT_NAMES} <= set(problem.params)
@@ -53,6 +70,10 @@ GOOD = 'sensors = ["radar", "camera"]\ncost_weight = 0.002\n[params]\n"radar.hfo
     (GOOD.replace('"camera"', '"sonar"'), "unknown sensor 'sonar'"),
     (GOOD.split("[params]")[0], "no [params]"),
     ("sensors = [\n", "not valid TOML"),
+    (GOOD + "[sensor_config]\n", "[sensor_config] must be a table"),
+    (GOOD + "[sensor_config]\nradar = 3\n", "sensor_config radar must be a TOML path"),
+    (GOOD + '[sensor_config]\nradar = "absent.toml"\n', "sensor_config radar: "),
+    (GOOD + '[sensor_config]\nlidar = "suite.toml"\n', "sensor_config names 'lidar', not a member"),
 ])
 def test_a_malformed_suite_is_refused_in_one_line_naming_the_file(tmp_path, text, needle):
     path = tmp_path / "suite.toml"
@@ -77,3 +98,12 @@ def test_a_bad_suite_on_the_cli_is_one_line_exit_2_nothing_written(tmp_path, ext
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and needle in lines[0], proc.stderr
     assert not out.exists()
+
+
+def test_a_sensor_config_by_member_is_refused_where_it_cannot_apply():
+    law = str(ROOT / "configs/sensors/laws/radar_swerling1.toml")
+    with pytest.raises(ds.InputError, match="is for a suite"):
+        ds.Problem(sensor="radar", sensor_config={"radar": law})
+    radar = ds.sensors.Radar.from_toml()
+    with pytest.raises(ds.InputError, match="carries its own constants"):
+        ds.Problem(sensor=[radar, "camera"], params={"camera.hfov_deg": (30.0, 60.0)}, sensor_config={"radar": law})

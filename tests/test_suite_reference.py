@@ -9,6 +9,8 @@ expectation `fuse` forms from the probabilities (`diffsense.sensors._fusion`).
 
 from __future__ import annotations
 
+from dataclasses import replace as dataclasses_replace
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -163,3 +165,31 @@ def test_suite_gradient_against_float64_central_differences_and_finite_at_extrem
         for b in (0.01, 360.0):
             v, g = vg(suite, jnp.asarray([a, b]))
             assert np.isfinite(float(v)) and np.all(np.isfinite(np.asarray(g))), (a, b)
+
+
+def test_the_box_solve_judges_answers_on_e_ref_under_a_random_law(suite):
+    import diffsense as ds
+    from diffsense._suite_solve import _functions
+    from diffsense.report._tables import box_table
+
+    laws = {"radar": "configs/sensors/laws/radar_swerling1.toml", "camera": "configs/sensors/laws/camera_confidence.toml"}
+    params = {n: (5.0, 60.0) for n in NAMES}
+    random = ds.Problem(sensor=["radar", "camera"], params=params, sensor_config=laws)
+    ev, fns, _ = _functions(random, suite, None, 10)
+    x = list(R_EDGE)
+    assert fns.e_hard(x) == ev.e_reference(x) and ev.e_reference(x) != ev.e_hard(x)
+    # the threshold law, or the hard estimator: E_hard itself
+    threshold = suite_objective()
+    threshold = eqx.tree_at(lambda o: o.sensor, threshold, Suite((sensor.Radar.from_toml(), sensor.Camera.from_toml())))
+    ev, fns, _ = _functions(ds.Problem(sensor=["radar", "camera"], params=params), threshold, None, 10)
+    assert fns.e_hard(x) == ev.e_hard(x)
+    ev, fns, _ = _functions(dataclasses_replace(random, estimator="hard"), suite, None, 10)
+    assert fns.e_hard(x) == ev.e_hard(x)
+    # and the printed summary says so
+    result = {"sensor": "radar+camera", "units": {n: "deg" for n in NAMES}, "r_star": dict(zip(NAMES, x)),
+              "E_hard_star": 1.0, "E_soft_star": 1.1, "notes": [],
+              "reference": {"answer_on": "E_ref", "E_ref_star": 1.2, "E_ref_star_se": 0.01, "draws": 4, "estimator": "auto"},
+              "box": {"gradient": dict.fromkeys(NAMES, 0.0), "on_bound": dict.fromkeys(NAMES, ""), "cost_weight": 0.0,
+                      "cost": 1.0, "J_star": 1.2, "source": "start 1", "counts": {"soft": 3, "hard": 2}}}
+    text = box_table(result)
+    assert "2 reference evaluations" in text and "J is judged on E_ref: E_ref(r*) 1.2" in text

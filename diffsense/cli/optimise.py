@@ -175,6 +175,8 @@ def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict
     fields: dict = {}
     if suite:
         fields["cost_weight"] = suite["cost_weight"]
+        if "sensor_config" in suite:
+            fields["sensor_config"] = suite["sensor_config"]
     if args.cost_weight is not None:
         fields["cost_weight"] = args.cost_weight
     if args.scenarios is not None:

@@ -145,6 +145,10 @@ def breakdown_table(result: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _on_ref(result: Mapping[str, Any]) -> bool:
+    return (result.get("reference") or {}).get("answer_on") == "E_ref"
+
+
 def box_table(result: Mapping[str, Any]) -> str:
     """The printed summary of a many-parameter solve: r*, what still matters (dJ/dr) and bounds."""
     box = result["box"]
@@ -154,6 +158,12 @@ def box_table(result: Mapping[str, Any]) -> str:
              format_table(["parameter", "r*", "unit", "dJ/dr at r*", ""], rows),
              f"E_hard(r*) {_cell(result['E_hard_star'])} m, E_soft {_cell(result['E_soft_star'])} m, "
              f"cost {_cell(box['cost'])}, J {_cell(box['J_star'])} ({box['source']}); "
-             f"{box['counts'].get('soft', 0)} value-and-gradient + {box['counts'].get('hard', 0)} hard evaluations"]
+             f"{box['counts'].get('soft', 0)} value-and-gradient + {box['counts'].get('hard', 0)} "
+             f"{'reference' if _on_ref(result) else 'hard'} evaluations"]
+    if _on_ref(result):
+        ref = result["reference"]
+        lines.append(f"J is judged on E_ref: E_ref(r*) {_cell(ref['E_ref_star'])} +- {_cell(ref['E_ref_star_se'])} m "
+                     f"(standard error; {ref['draws']} detection draws; estimator {ref['estimator']}); "
+                     f"E_hard(r*) has each detection at its median")
     lines += [f"note: {n}" for n in result.get("notes", [])]
     return "\n".join(lines)

@@ -97,7 +97,8 @@ class BoxResult:
     Attributes:
         x_star: r*, {name: value} in each parameter's unit.
         J_star: E_hard + cost_weight * cost at r* (what the answer was chosen on).
-        E_hard, E_soft: E [m] at r*, hard and soft (at the last temperature).
+        E_hard, E_soft: E [m] at r*, hard and soft (at the last temperature). "Hard" is the
+            functions' `e_hard`: E_ref when they judge on it (a probabilistic detection law).
         cost: cost(r*) [currency] (0 without a cost model).
         gradient: dJ_soft/dx at r* per parameter [m per unit] (at the last temperature).
         gradient_E: dE_soft/dx at r* per parameter [m per unit].

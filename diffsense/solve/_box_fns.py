@@ -54,11 +54,15 @@ class BoxFunctions:
         self._costs: dict[tuple, tuple[float, np.ndarray]] = {}
 
     @classmethod
-    def from_evaluator(cls, evaluator: Any, cost: Callable[[Mapping[str, Any]], Any] | None = None) -> BoxFunctions:
+    def from_evaluator(cls, evaluator: Any, cost: Callable[[Mapping[str, Any]], Any] | None = None,
+                       e_answer: HardFn | None = None) -> BoxFunctions:
         """From a `diffsense.solve.Evaluator` (its objective's `names` order x); `cost` a
-        jax-differentiable cost(r) over the same names (e.g. `make_cost(model, sensor)`)."""
+        jax-differentiable cost(r) over the same names (e.g. `make_cost(model, sensor)`);
+        `e_answer` the objective answers are judged on in place of its E_hard (E_ref, under a
+        probabilistic detection law)."""
         names = evaluator.objective.names
-        return cls(names, evaluator.value_and_grad, evaluator.e_hard, None if cost is None else _jit_cost(names, cost))
+        return cls(names, evaluator.value_and_grad, e_answer or evaluator.e_hard,
+                   None if cost is None else _jit_cost(names, cost))
 
     @classmethod
     def from_jax(cls, names: Sequence[str], e2_soft: Callable, e_hard: Callable,
