@@ -193,3 +193,19 @@ def test_the_box_solve_judges_answers_on_e_ref_under_a_random_law(suite):
                       "cost": 1.0, "J_star": 1.2, "source": "start 1", "counts": {"soft": 3, "hard": 2}}}
     text = box_table(result)
     assert "2 reference evaluations" in text and "J is judged on E_ref: E_ref(r*) 1.2" in text
+
+
+def test_draw_margins_of_a_suite_are_the_nearest_member_to_flipping(suite):
+    from diffsense.metrics import reference_draw_margins
+
+    m = np.asarray(eqx.filter_jit(reference_draw_margins)(suite, jnp.asarray(R_EDGE), 3))
+    p, us, _ = _draws(suite, R_EDGE, 3)
+
+    def logit(x):
+        x = np.clip(np.asarray(x, np.float64), 1e-12, 1 - 1e-12)
+        return np.log(x) - np.log1p(-x)
+
+    per_member = [np.abs(logit(p[i])[None] - logit(us[i])) for i in range(2)]
+    assert m.shape == per_member[0].shape
+    edge = (np.asarray(p[0]) > 1e-6) & (np.asarray(p[0]) < 1 - 1e-6) & (np.asarray(p[1]) > 1e-6) & (np.asarray(p[1]) < 1 - 1e-6)
+    np.testing.assert_allclose(m[:, edge], np.minimum(*per_member)[:, edge], rtol=1e-6)
