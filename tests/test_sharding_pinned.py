@@ -39,6 +39,11 @@ def test_one_device_leaves_the_tree_as_it_is():
 
 
 def test_four_devices_pad_with_zero_weight_and_split_the_rows():
+    # Called here too (one device: a no-op) so that mutmut, which runs for each mutant only the
+    # tests it saw reach the mutated function in this process, runs this test for its mutants;
+    # the subprocess inherits the mutant under test from the environment.
+    x = np.arange(3.0)
+    assert shard_leading_axis((x,))[0] is x
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     proc = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, env=env, capture_output=True,
                           text=True, timeout=300)
