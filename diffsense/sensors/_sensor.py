@@ -15,8 +15,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import equinox as eqx
-import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import ArrayLike, Float
 
 from diffsense.errors import InputError
 from diffsense.scene import Scene
@@ -126,7 +125,3 @@ def make_sensor(sensor: str | Sensor | Sequence[str | Sensor], config: str | Non
         return _REGISTRY[sensor]()
     return _REGISTRY[sensor](config, profile)
 
-
-def as_scalar(value: Any, dtype) -> Array:
-    """A parameter value as an array of the computation's dtype (a float64 solver over float32 data)."""
-    return jnp.asarray(value).astype(dtype)
