@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
+# No test reads or writes the user's persistent compilation cache: a command run in-process
+# (`main([...])`) would otherwise switch it on for every later test of the session, which then
+# depends on whatever other runs left there. The tests of the cache give it a folder of their own.
+os.environ.setdefault("DIFFSENSE_NO_CACHE", "1")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"

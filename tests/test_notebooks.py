@@ -90,6 +90,7 @@ def _fast_facts(prefix: str, tmp_path_factory) -> dict:
     with pytest.MonkeyPatch.context() as mp:
         # A private compilation cache shared by the notebooks of this session (same fast shapes).
         mp.setenv("XDG_CACHE_HOME", str(NOTEBOOKS.parent / ".pytest_cache" / "notebook-xla"))
+        mp.delenv("DIFFSENSE_NO_CACHE", raising=False)  # (conftest turns the user's cache off)
         mp.setenv("MPLBACKEND", "Agg")
         mp.setenv(FACTS_ENV, str(facts))
         execute.execute(path, fast=True, timeout_s=900, write=False, extra_code=FACTS[prefix])
