@@ -14,6 +14,18 @@ jax.config.update("jax_enable_x64", True)
 # depends on whatever other runs left there. The tests of the cache give it a folder of their own.
 os.environ.setdefault("DIFFSENSE_NO_CACHE", "1")
 
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    """Drop JAX's compiled programs after each test module, so one process running the whole
+    suite does not keep every executable it ever compiled. Without it the suite's process
+    segfaulted inside XLA (compiling, or loading an executable) at 97 % of the suite, twice, in
+    a test that passes alone; an executable count near the kernel's limit of 65530 memory
+    mappings per process is the suspected cause, not a proven one."""
+    yield
+    jax.clear_caches()
+
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
 NGSIM_WEIGHTS = SHARED / "weights" / "ngsim"
