@@ -21,6 +21,7 @@ from diffsense import config as cfgio
 from diffsense._answer import near_optimal
 from diffsense._breakdown import breakdown, tracked_summary
 from diffsense._distributed import to_host
+from diffsense._executables import call
 from diffsense._domain import domain_check, domain_note
 from diffsense._problem import Problem
 from diffsense._result import Curves, Result
@@ -111,6 +112,10 @@ def _config(problem: Problem) -> dict[str, Any]:
     return cfgio.to_dict(fields)
 
 
+def _first_variant(scenes):
+    return jax.tree.map(lambda a: a[0], scenes)
+
+
 def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: int, hard_only: bool) -> Curves:
     tau = result.tau_schedule[-1] if result.tau_schedule else 1.0
     r_curve = sorted({p.r for p in result.sweep} | {result.r_star}
@@ -129,7 +134,7 @@ def _curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: in
             gt[name] = h.rmse_gt[i]
             sensor.setdefault(name, {})[r] = h.rmse_sensor[i]
     # a[0] on the device: in a multi-process run the whole array is not addressable here
-    first = jax.tree.map(lambda a: np.asarray(a[0]), E.data.scenes)  # nominal variant, first scenario
+    first = to_host(call(_first_variant, E.data.scenes))  # nominal variant, first scenario
     cols = [v for v in range(1, first.present.size) if first.present[v]]  # the ego knows itself
     # From the hard evaluations (memoised: lo and hi are sweep steps), not a program of its own.
     timeline = {r: np.asarray(ev.hard(r).p_detect[0])[:, cols] for r in sorted({lo, result.r_star, hi})}

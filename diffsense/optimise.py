@@ -7,4 +7,4 @@ if __name__ == "__main__":
     from diffsense.cli import run
     from diffsense.cli.optimise import main
 
-    run(main)
+    run(main, end_process=True)

@@ -8,6 +8,8 @@ from pathlib import Path
 import jax
 import pytest
 
+from diffsense._executables import keep_in
+
 jax.config.update("jax_enable_x64", True)
 # No test reads or writes the user's persistent compilation cache: a command run in-process
 # (`main([...])`) would otherwise switch it on for every later test of the session, which then
@@ -24,6 +26,7 @@ def _release_compiled_programs():
     mappings per process is the suspected cause, not a proven one."""
     yield
     jax.clear_caches()
+    keep_in(None)  # a command run in-process may have set a folder for compiled programs
 
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -35,3 +35,4 @@ def test_a_second_run_compiles_nothing(tmp_path):
         compiled.append(json.loads((out / "result.json").read_text())["wall_s"]["programs_compiled"])
     assert compiled[0] > 10 and compiled[1] == 0, compiled
     assert any((tmp_path / "cache").iterdir())  # JAX_COMPILATION_CACHE_DIR is honoured
+    assert list((tmp_path / "cache" / "executables").glob("*.exe"))  # the objective's programs too

@@ -179,3 +179,24 @@ def test_run_turns_os_errors_into_one_line_and_restores_handlers(tmp_path, capsy
     with pytest.raises(SystemExit) as info:
         run(lambda: 0)
     assert info.value.code == 0
+
+
+def test_an_entry_point_ends_at_once_with_its_code_and_its_output_flushed(tmp_path):
+    """`run(main, end_process=True)` skips the interpreter's teardown (`os._exit`): what main
+    printed, even unflushed, still arrives, and the exit code is main's."""
+    script = tmp_path / "entry.py"
+    script.write_text(textwrap.dedent("""
+        import atexit, sys
+        from diffsense.cli._run import run
+        atexit.register(lambda: print("teardown ran"))
+        def main():
+            print("printed " * 2000)  # more than one buffer, on a pipe
+            sys.stderr.write("to stderr")
+            return 3
+        run(main, end_process=True)
+    """))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 3
+    assert proc.stdout.strip() == ("printed " * 2000).strip()  # all of it, and no teardown line
+    assert proc.stderr == "to stderr"

@@ -74,4 +74,4 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     from diffsense.cli import run
 
-    run(main)
+    run(main, end_process=True)

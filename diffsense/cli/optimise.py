@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import math
+import threading
 from pathlib import Path
 
 from diffsense import cli as _cli
@@ -290,9 +292,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.distributed:
         out, args.quiet = _join(args, out)
     import diffsense as ds
-    from diffsense import report
     from diffsense._io import write_bytes
     from diffsense.predictors import load_predictor
+
+    # matplotlib's import (about 0.4 s) overlaps the computations, which release the GIL.
+    threading.Thread(target=importlib.import_module, args=("diffsense.report",), daemon=True).start()
 
     progress = Progress(args.quiet)
     theta = _sensitivity_names(args.sensitivity, todo)
@@ -310,6 +314,8 @@ def main(argv: list[str] | None = None) -> int:
             folder = staging / problem.sensor_kind if len(todo) > 1 else staging
             result = ds.optimise(problem, predictor=predictor, progress=progress, on_evaluation=progress.evaluation,
                                  sensitivity=theta)
+            from diffsense import report  # imported in the background above (or waits for it)
+
             results[problem.sensor_kind] = report.write_run(result, folder)
         if len(results) > 1:
             first = next(iter(results.values()))
@@ -331,4 +337,4 @@ def main(argv: list[str] | None = None) -> int:
 
 def console() -> None:
     """The `diffsense-optimise` console script: `main` under the error contract of `run`."""
-    _cli.run(main)
+    _cli.run(main, end_process=True)

@@ -36,4 +36,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    _cli.run(main)
+    _cli.run(main, end_process=True)

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffsense._executables import call
 from diffsense.config import replace
 from diffsense.errors import InputError
 from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms
@@ -69,6 +70,10 @@ def _scenario(name: str, background_vehicles: int) -> ScenarioConfig:
 
 
 def _concat_scenes(scenes: Sequence[Scene], width: int) -> Scene:
+    return call(_concat_padded, tuple(scenes), width)  # one program, not one per field
+
+
+def _concat_padded(scenes: tuple[Scene, ...], width: int) -> Scene:
     return jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(s, width) for s in scenes])
 
 
@@ -157,7 +162,7 @@ def recorded_scenes(
 
 def ground_truth_predictions(scenes: Scene, frames, fill: FillPolicy, predictor) -> jax.Array:
     """The predictor's output from ground-truth histories at every instant: [N, I, F, 2] [m]."""
-    return _ground_truth_predictions(scenes, tuple(int(f) for f in np.asarray(frames)), fill, predictor)
+    return call(_ground_truth_predictions, scenes, tuple(int(f) for f in np.asarray(frames)), fill, predictor)
 
 
 @eqx.filter_jit
@@ -168,7 +173,6 @@ def _true_futures(scenes: Scene, frames: tuple[int, ...], spec: InputSpec) -> ja
 
 # One program, inputs and prediction together: built op by op, the inputs alone were some sixty
 # small programs, each traced, lowered and looked up in the compilation cache on every run.
-@eqx.filter_jit
 def _ground_truth_predictions(scenes: Scene, frames: tuple[int, ...], fill: FillPolicy, predictor) -> jax.Array:
     at = jnp.asarray(frames)
     gt = jax.vmap(lambda s: build_inputs(s, ground_truth_detections(s), at, fill, predictor.spec))(scenes)

@@ -225,14 +225,24 @@ def new_model(maneuvers: bool, seed: int) -> CSLSTM:
     return nnx.merge(graphdef, _init_fn(maneuvers)(jax.random.key(seed)))
 
 
+def _abstract(maneuvers: bool):
+    """(graphdef, state of shapes) of the network, traced without any arithmetic."""
+    return nnx.split(nnx.eval_shape(lambda: CSLSTM(maneuvers, rngs=nnx.Rngs(0))))
+
+
 def model_from_params(maneuvers: bool, params: dict) -> CSLSTM:
     """The network with the given parameter arrays (a pure dict shaped like `param_shapes`)."""
-    graphdef, state = nnx.split(nnx.eval_shape(lambda: CSLSTM(maneuvers, rngs=nnx.Rngs(0))))
-    nnx.replace_by_pure_dict(state, jax.tree.map(jnp.asarray, params))
+    graphdef, state = _abstract(maneuvers)
+    nnx.replace_by_pure_dict(state, jax.tree.map(jax.device_put, params))  # no program per array
     return nnx.merge(graphdef, state)
 
 
 def param_shapes(maneuvers: bool) -> dict:
     """{group: {name: shape}} of the network's parameters, computed without any arithmetic."""
-    _, state = nnx.split(nnx.eval_shape(lambda: CSLSTM(maneuvers, rngs=nnx.Rngs(0))))
-    return {k: {kk: tuple(vv.shape) for kk, vv in v.items()} for k, v in nnx.to_pure_dict(state).items()}
+    return {k: dict(v) for k, v in _shape_table(maneuvers)}
+
+
+@functools.lru_cache(maxsize=2)
+def _shape_table(maneuvers: bool) -> tuple:
+    _, state = _abstract(maneuvers)
+    return tuple((k, tuple((kk, tuple(vv.shape)) for kk, vv in v.items())) for k, v in nnx.to_pure_dict(state).items())

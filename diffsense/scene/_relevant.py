@@ -13,13 +13,13 @@ largest count in the batch, so the cost downstream does not grow with far traffi
 
 from __future__ import annotations
 
-import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Int
 
+from diffsense._executables import call
 from diffsense.scene._datatypes import BACKGROUND, CAR, EGO_INDEX, TARGET_INDEX, Scene
 
 # The road-frame box must contain the straight sight line, which bows in (s, d) on a bend by the
@@ -33,12 +33,13 @@ _PAD_BEHIND_M = 1000.0
 def _window_frames(num_frames: int, frames: Int[ArrayLike, " I"] | None, dt_s: float,
                    history_s: float) -> Bool[Array, " T"]:
     """Frames inside the history window of some prediction instant (all frames if none given)."""
+    xp = jnp if isinstance(frames, jax.core.Tracer) else np  # numpy: no program to look up
     if frames is None:
-        return jnp.ones((num_frames,), bool)
-    t = jnp.arange(num_frames)
-    f = jnp.asarray(frames)
+        return np.ones((num_frames,), bool)
+    t = xp.arange(num_frames)
+    f = xp.asarray(frames)
     back = round(history_s / dt_s)
-    return jnp.any((t[:, None] <= f[None, :]) & (t[:, None] >= f[None, :] - back), axis=-1)
+    return xp.any((t[:, None] <= f[None, :]) & (t[:, None] >= f[None, :] - back), axis=-1)
 
 
 def _overlap(lo_a, hi_a, lo_b, hi_b):
@@ -85,10 +86,9 @@ def relevant_mask(
     sensors sit.
     """
     window = _window_frames(scene.num_frames, frames, scene.dt_s, history_s)
-    return _mask(scene, window, float(margin_m), float(sensor_reach_m), float(grid_half_length_m))
+    return call(_mask, scene, window, float(margin_m), float(sensor_reach_m), float(grid_half_length_m))
 
 
-@functools.partial(jax.jit, static_argnums=(2, 3, 4))
 def _mask(scene: Scene, window: Bool[Array, " T"], margin_m: float, sensor_reach_m: float,
           grid_half_length_m: float) -> Bool[Array, "*N V"]:
     one = lambda sc: _relevant_one(sc, window, margin_m, sensor_reach_m, grid_half_length_m)  # noqa: E731
@@ -119,8 +119,9 @@ def select_vehicles(scene: Scene, order: Int[ArrayLike, "*N K"], keep: Bool[Arra
     """`scene` [*N, T, V] reduced to the selection of `relevant_selection` [*N, T, K] (jit-able)."""
     batched = scene.s_m.ndim == 3
     sc = scene if batched else jax.tree.map(lambda a: a[None], scene)
-    order, keep = (jnp.asarray(order), jnp.asarray(keep)) if batched else (jnp.asarray(order)[None], jnp.asarray(keep)[None])
-    out = _gather(sc, order, keep)
+    xp = np if isinstance(order, np.ndarray) and isinstance(keep, np.ndarray) else jnp  # numpy: no program
+    order, keep = (xp.asarray(order), xp.asarray(keep)) if batched else (xp.asarray(order)[None], xp.asarray(keep)[None])
+    out = call(_gather, sc, order, keep)
     return out if batched else jax.tree.map(lambda a: a[0], out)
 
 
@@ -140,7 +141,6 @@ def relevant_vehicles(
     return select_vehicles(scene, order, keep)
 
 
-@jax.jit
 def _gather(scene: Scene, order: Int[Array, "N K"], keep: Bool[Array, "N K"]) -> Scene:
     per_frame = lambda a: jnp.take_along_axis(a, order[:, None, :], axis=-1)  # noqa: E731
     per_vehicle = lambda a: jnp.take_along_axis(a, order, axis=-1)  # noqa: E731

@@ -10,12 +10,12 @@ update of Treiber & Kanagaraj (2015): v' = v + a dt, s' = s + (v + v') dt / 2, s
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from diffsense._executables import call
 from diffsense.errors import InputError
 from diffsense.scene._background_mobil import lane_change_starts
 from diffsense.scene._datatypes import BACKGROUND, Scene
@@ -145,12 +145,18 @@ def simulate_plan(
     )
 
 
-@functools.partial(jax.jit, static_argnames=("driver", "num_variants", "num_frames", "mobil_period_frames"))
 def simulate_numbers(nums: ScenarioNumbers, road: Road, driver: DriverModel, key: PRNGKeyArray,
                      num_variants: int, num_frames: int, mobil: MOBILParams | None = None,
                      mobil_period_frames: int = 10) -> Scene:
     """`simulate_scenario` on a scenario's arrays: one compilation per (variants, frames, vehicles)
-    shared by every scenario and road (their values are traced, not baked in)."""
+    shared by every scenario and road (their values are traced, not baked in; the driver model
+    and the counts are static)."""
+    return call(_simulate_numbers, nums, road, driver, key, num_variants, num_frames, mobil, mobil_period_frames)
+
+
+def _simulate_numbers(nums: ScenarioNumbers, road: Road, driver: DriverModel, key: PRNGKeyArray,
+                      num_variants: int, num_frames: int, mobil: MOBILParams | None,
+                      mobil_period_frames: int) -> Scene:
     keys = jax.random.split(key, num_variants)
     nominal = jnp.arange(num_variants) == 0
     plans = jax.vmap(draw_plan, in_axes=(None, 0, 0))(nums, keys, nominal)

@@ -109,7 +109,9 @@ def scenario_numbers(cfg: ScenarioConfig, models: VehicleModels, road: Road, dty
     lanes_here = int(road.num_lanes)
     lanes = [cfg.ego.lane, cfg.target_lane, cfg.ego.lane, cfg.target_lane, cfg.adjacent_lane]
     allowed = [(cfg.ego.kind,)] + [sp.random_kinds for sp in specs]
-    f = lambda a: jnp.asarray(a, dtype)  # noqa: E731
+    def f(a):  # numpy, then one transfer: no program per array (a traced road stays traced)
+        return jnp.asarray(a, dtype) if isinstance(a, jax.core.Tracer) else jax.device_put(np.asarray(a, dtype))
+
     return ScenarioNumbers(
         ego_s_m=f(rng(cfg.ego.s_m)), ego_speed_mps=f(rng(cfg.ego.speed_kmh, _KMH)),
         lc_start_s=f(rng(cfg.lane_change.start_s)), lc_duration_s=f(rng(cfg.lane_change.duration_s)),

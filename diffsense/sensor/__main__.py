@@ -3,4 +3,4 @@
 from diffsense.cli import run
 from diffsense.cli.sensors import main
 
-run(main)
+run(main, end_process=True)

@@ -13,12 +13,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from diffsense._distributed import to_host
+from diffsense._executables import call
 from diffsense.metrics import ReferenceEvaluation, is_deterministic
 
 
@@ -27,22 +27,18 @@ def _deterministic(objective: Any) -> bool:
     return sensor is not None and is_deterministic(sensor)
 
 
-@eqx.filter_jit
 def _value_and_grad(objective, x, tau):
     return jax.value_and_grad(lambda v: objective.e2(objective.point(v), tau))(x)
 
 
-@eqx.filter_jit
 def _hard(objective, x):
     return objective.hard(objective.point(x))
 
 
-@eqx.filter_jit
 def _reference(objective, x):
     return objective.reference(objective.point(x))
 
 
-@eqx.filter_jit
 def _detections(objective, x, tau, mode):
     return objective.detections(objective.point(x), mode, tau)
 
@@ -72,7 +68,7 @@ class Evaluator:
         key = (self._key(x), float(tau))
         if key not in self._soft:
             self.counts["soft"] += 1
-            v, g = _value_and_grad(self.objective, jnp.asarray(key[0], self.dtype), jnp.asarray(key[1], self.dtype))
+            v, g = call(_value_and_grad, self.objective, jnp.asarray(key[0], self.dtype), jnp.asarray(key[1], self.dtype))
             v, g = to_host((v, g))  # gathered from every process of a distributed run
             self._soft[key] = (float(v), np.asarray(g, np.float64))
             if self._progress:
@@ -84,7 +80,7 @@ class Evaluator:
         key = self._key(x)
         if key not in self._hard:
             self.counts["hard"] += 1
-            out = _hard(self.objective, jnp.asarray(key, self.dtype))
+            out = call(_hard, self.objective, jnp.asarray(key, self.dtype))
             self._hard[key] = to_host(out)
             if self._progress:
                 self._progress("hard", float(np.sqrt(max(float(self._hard[key].e2), 0.0))), 0.0)
@@ -113,7 +109,7 @@ class Evaluator:
                                                        draws=e2[None])
         if key not in self._reference:
             self.reference_count += 1
-            self._reference[key] = to_host(_reference(self.objective, jnp.asarray(key, self.dtype)))
+            self._reference[key] = to_host(call(_reference, self.objective, jnp.asarray(key, self.dtype)))
             if self._progress:
                 self._progress("reference", float(self._reference[key].e), 0.0)
         return self._reference[key]
@@ -138,7 +134,7 @@ class Evaluator:
         return self.value_and_grad(x, tau)[0]
 
     def detections(self, x, mode: str = "hard", tau: float = 1.0):
-        return _detections(self.objective, jnp.asarray(self._key(x), self.dtype), jnp.asarray(tau, self.dtype), mode)
+        return call(_detections, self.objective, jnp.asarray(self._key(x), self.dtype), jnp.asarray(tau, self.dtype), mode)
 
     def host_value_and_grad(self, r: float, tau: float) -> tuple[float, float]:
         """(E^2, dE^2/dr) of a one-parameter objective as floats: `solve`'s `value_and_grad`."""
@@ -160,16 +156,16 @@ class Evaluator:
             v, g = self.value_and_grad(float(r), float(tau))
             return np.asarray(v, dtype), np.asarray(g[0], dtype)
 
-        def call(r, tau):
+        def callback(r, tau):
             return jax.pure_callback(host, (spec, spec), r, tau)
 
         @jax.custom_jvp
         def e2_soft(r, tau):
-            return call(r, tau)[0]
+            return callback(r, tau)[0]
 
         @e2_soft.defjvp
         def _jvp(primals, tangents):
-            v, g = call(*primals)
+            v, g = callback(*primals)
             return v, g * tangents[0]
 
         return e2_soft, lambda r: self.e_hard(float(r))
