@@ -7,8 +7,9 @@ pinned to a value worked by hand.
 - Simulated scenes: the weather of each variant is its scenario TOML's (a copy of sc01 with
   2 mm/h of rain and 300 m of fog, beside sc01 itself: clear, rain 0 and visibility infinite),
   and `background_vehicles` sets every scenario's background count (sc01 ships 0).
-- Recorded scenes are reduced at the instants the default problem predicts at: their default
-  stride is `Problem`'s `prediction_stride_frames` (4), as are the simulated scenes'.
+- Recorded scenes are reduced at the instants the default problem predicts at: by default the
+  vehicles kept are those relevant at every 4th frame, `Problem`'s `prediction_stride_frames`
+  (the simulated scenes' default stride too).
 - A Monte-Carlo estimator of one sample is allowed; none is not.
 """
 
@@ -25,8 +26,11 @@ import pytest
 from diffsense._problem import Problem
 from diffsense.errors import InputError
 from diffsense.metrics import EstimatorConfig, recorded_scenes, simulate_scenes, speed_shifted_scenes
+from diffsense.metrics import _build
 from diffsense.metrics._build import _pad_vehicles
 from diffsense.predictors import CSLSTM_SPEC
+from diffsense.scene import relevant_vehicles
+from tests._recorded_files import write_highd
 from tests._synthetic import straight_scene
 from tests._toy_pipeline import ToySensor
 
@@ -59,15 +63,13 @@ def foggy_and_clear(tmp_path_factory):
                                 sensors=(ToySensor(),), stride_frames=10, background_vehicles=3)
 
 
-def test_simulated_variants_carry_their_scenarios_weather(foggy_and_clear):
-    _, index, names, weather = foggy_and_clear
+def test_simulated_variants_carry_their_scenarios_weather_and_background(foggy_and_clear):
+    # One test for both: mutmut runs a mutant's tests only where its statistics saw the function
+    # called, and the module's fixture calls it once, in the first test that asks for it.
+    shifted, index, names, weather = foggy_and_clear
     assert names == ("sc01_fog", "sc01") and list(index) == [0, 0, 1, 1]
     np.testing.assert_array_equal(np.asarray(weather.rain_mm_h), [2.0, 2.0, 0.0, 0.0])
     np.testing.assert_array_equal(np.asarray(weather.fog_visibility_m), [300.0, 300.0, np.inf, np.inf])
-
-
-def test_background_vehicles_sets_every_scenarios_count(foggy_and_clear):
-    shifted = foggy_and_clear[0]
     assert [c.background.count for c in shifted.configs] == [3, 3]
 
 
@@ -76,6 +78,18 @@ def test_scenes_default_to_the_problems_prediction_stride():
     assert stride == 4
     for fn in (recorded_scenes, simulate_scenes, speed_shifted_scenes):
         assert inspect.signature(fn).parameters["stride_frames"].default == stride
+
+
+def test_recorded_scenes_keep_the_vehicles_relevant_at_every_fourth_frame(tmp_path, monkeypatch):
+    asked = []
+
+    def spy(scene, frames, **reach):
+        asked.append(np.asarray(frames))
+        return relevant_vehicles(scene, frames, **reach)
+
+    monkeypatch.setattr(_build, "relevant_vehicles", spy)
+    recorded_scenes(f"highd:{write_highd(tmp_path)}", spec=CSLSTM_SPEC, sensors=(ToySensor(),))
+    assert asked and all(len(frames) >= 2 and set(np.diff(frames)) == {4} for frames in asked)
 
 
 def test_one_monte_carlo_sample_is_allowed_none_is_not():
