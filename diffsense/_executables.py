@@ -19,28 +19,21 @@ outside the libraries named in `_TRUSTED_MODULES`, a file that does not load) fa
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import dataclasses
-import functools
 import hashlib
 import importlib.metadata
 import os
 import pickle
 import platform
-import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import equinox as eqx
 import jax
 from jax import monitoring
-
-# Reported as JAX reports its compilations, so `diffsense._timing.CompileClock` counts them.
-LOAD_EVENT = "/diffsense/executables/load_duration"
-PARALLEL_COMPILE_EVENT = "/diffsense/executables/parallel_compile_duration"
 
 _folder: Path | None = None
 _memory: dict[tuple, Callable[..., Any]] = {}
@@ -64,90 +57,27 @@ def call(fn: Callable[..., Any], *args: Any) -> Any:
     The executable comes from the folder `keep_in` set when it holds one for the same key, else
     it is compiled and stored there; one compiled per key is kept in memory too.
     """
-    entry = _entry(fn, args)
-    if entry is None:
+    dynamic, static = eqx.partition(args, eqx.is_array)
+    leaves, treedef = jax.tree.flatten(dynamic)
+    statics = _stable_repr(jax.tree.leaves(static))
+    if statics is None or not _cacheable(leaves, treedef, jax.tree.structure(static)):
         if fn not in _jitted:
             _jitted[fn] = eqx.filter_jit(fn)
         return _jitted[fn](*args)
-    if entry.memory_key not in _memory:
-        prepare([(fn, args)])
-    return _memory[entry.memory_key](entry.dynamic)
-
-
-def prepare(calls: Sequence[tuple[Callable[..., Any], tuple]]) -> None:
-    """Make each `call(fn, *args)` of `calls` ready before it is asked for: its executable loaded
-    from the folder, or compiled and stored. Those to compile are compiled together, one thread
-    each: XLA compiles one program on one core, so two programs compile in the time of the
-    longer one on a 2-core machine. Nothing happens without a folder (`keep_in`)."""
-    todo: dict[tuple, _Entry] = {}
-    for fn, args in calls:
-        entry = _entry(fn, args)
-        if entry is None or entry.memory_key in _memory or entry.memory_key in todo:
-            continue
-        loaded = _load(entry.path(), entry.in_tree)
-        if loaded is not None:
-            _memory[entry.memory_key] = loaded
-        else:
-            todo[entry.memory_key] = entry
-    if not todo:
-        return
-    entries = list(todo.values())
-    lowered = [jax.jit(e.program()).lower(e.dynamic) for e in entries]  # tracing holds the GIL
-    start = time.perf_counter()
-    with _compiled_afresh(), concurrent.futures.ThreadPoolExecutor(min(len(entries), os.cpu_count() or 1)) as pool:
-        done = list(pool.map(_compile, lowered))
-    monitoring.record_event_duration_secs(PARALLEL_COMPILE_EVENT, time.perf_counter() - start)
-    for entry, (program, options) in zip(entries, done):
-        _store(program, options, entry.path())
-        _memory[entry.memory_key] = program
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class _Entry:
-    """One kept program: `memory_key` without hashing; the file's key computed when needed."""
-
-    fn: Callable[..., Any]
-    dynamic: Any
-    static: Any
-    treedef: Any
-    avals: tuple
-    statics: str
-
-    @property
-    def memory_key(self) -> tuple:
-        return (self.fn, self.treedef, self.avals, jax.tree.structure(self.static), self.statics)
-
-    @property
-    def in_tree(self) -> Any:
-        return jax.tree.structure(((self.dynamic,), {}))
-
-    @functools.cached_property
-    def key(self) -> str:
-        return _disk_key(self.fn, self.treedef, self.avals, self.statics)
-
-    def path(self) -> Path:
-        return _folder / f"{self.key}.exe"
-
-    def program(self) -> Callable[..., Any]:
-        fn, static = self.fn, self.static
+    avals = tuple((leaf.shape, str(leaf.dtype), bool(getattr(leaf, "weak_type", False))) for leaf in leaves)
+    memory_key = (fn, treedef, avals, jax.tree.structure(static), statics)
+    if memory_key not in _memory:
+        key = _disk_key(fn, treedef, avals, statics)
+        path = _folder / f"{key}.exe"
+        in_tree = jax.tree.structure(((dynamic,), {}))
 
         def program(d):
             return fn(*eqx.combine(d, static))
 
         # Named after fn (its module name in XLA's dumps and profiles) and its key.
-        program.__name__ = program.__qualname__ = f"{fn.__name__}_{self.key[:16]}"
-        return program
-
-
-def _entry(fn: Callable[..., Any], args: tuple) -> _Entry | None:
-    """`call(fn, *args)`'s kept program, or None when it is not kept (see the module docstring)."""
-    dynamic, static = eqx.partition(args, eqx.is_array)
-    leaves, treedef = jax.tree.flatten(dynamic)
-    statics = _stable_repr(jax.tree.leaves(static))
-    if statics is None or not _cacheable(leaves, treedef, jax.tree.structure(static)):
-        return None
-    avals = tuple((leaf.shape, str(leaf.dtype), bool(getattr(leaf, "weak_type", False))) for leaf in leaves)
-    return _Entry(fn, dynamic, static, treedef, avals, statics)
+        program.__name__ = program.__qualname__ = f"{fn.__name__}_{key[:16]}"
+        _memory[memory_key] = _load(path, in_tree) or _compile_and_store(program, dynamic, path)
+    return _memory[memory_key](dynamic)
 
 
 def _stable_repr(statics: list[Any]) -> str | None:
@@ -228,6 +158,9 @@ def _cpu_flags() -> str:
     return platform.processor()
 
 
+LOAD_EVENT = "/diffsense/executables/load_duration"
+
+
 def _load(path: Path, in_tree: Any) -> Callable[..., Any] | None:
     start = time.perf_counter()
     try:
@@ -235,6 +168,7 @@ def _load(path: Path, in_tree: Any) -> Callable[..., Any] | None:
         program = _deserialize(payload, in_tree, out_tree, options)
     except Exception:  # a missing, partial or stale file: compile instead
         return None
+    # Reported as JAX reports its compilations, so `CompileClock` counts loading as compiling.
     monitoring.record_event_duration_secs(LOAD_EVENT, time.perf_counter() - start)
     return program
 
@@ -260,49 +194,35 @@ def _deserialize(payload: bytes, in_tree: Any, out_tree: Any, options: bytes) ->
     return jax.stages.Compiled(unloaded.load(), [], in_tree.unflatten(args_info_flat), out_tree, no_kwargs=no_kwargs)
 
 
-_thread = threading.local()
-
-
-@contextlib.contextmanager
-def _compiled_afresh() -> Iterator[None]:
-    """For the block, XLA compiles every program afresh and JAX's persistent cache is neither
-    read nor written. An executable JAX loaded from its cache lacks the code of kernels XLA
-    shares between programs, and its serialisation fails when loaded ("Function ... not found";
-    tests/test_executables.py). JAX's switch for the cache is read once per process, so the
-    compile step itself is replaced. Each thread records the compile options JAX gave XLA for
-    its program (loading passes them again, see `_deserialize`)."""
+def _compile_and_store(fn: Callable[..., Any], dynamic: Any, path: Path) -> Callable[..., Any]:
     from jax._src import compiler
+    from jax.experimental import serialize_executable
 
+    # Compiled afresh by XLA, never read from JAX's persistent cache: an executable JAX loaded
+    # from there lacks the code of kernels XLA shares between programs, and its serialisation
+    # fails when loaded ("Function ... not found"; tests/test_executables.py). JAX's flag to
+    # disable the cache is read once per process, so the compile step itself is replaced here.
+    options = []  # the compile options JAX gives XLA, kept for loading (see _deserialize)
     compile_or_get_cached = compiler.compile_or_get_cached
 
     def afresh(backend, computation, devices, compile_options, host_callbacks, executable_devices, *_):
-        _thread.options = compile_options
+        options.append(compile_options)
         return compiler.backend_compile_and_load(backend, computation, executable_devices, compile_options,
                                                  host_callbacks)
 
     compiler.compile_or_get_cached = afresh
     try:
-        yield
+        program = jax.jit(fn).lower(dynamic).compile()
     finally:
         compiler.compile_or_get_cached = compile_or_get_cached
-
-
-def _compile(lowered: Any) -> tuple[Any, Any]:
-    _thread.options = None
-    program = lowered.compile()
-    return program, _thread.options
-
-
-def _store(program: Any, options: Any, path: Path) -> None:
-    """Write `program` to `path` atomically; a failure only costs speed."""
-    from jax.experimental import serialize_executable
-
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
+        (compile_options,) = options
         payload, _, out_tree = serialize_executable.serialize(program)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_bytes(pickle.dumps((payload, out_tree, options.SerializeAsString())))
+        tmp.write_bytes(pickle.dumps((payload, out_tree, compile_options.SerializeAsString())))
         os.replace(tmp, path)
-    except Exception:  # a full disk, a read-only folder, an unpicklable output
+    except Exception:  # a full disk, a read-only folder, an unpicklable output: only costs speed
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
+    return program

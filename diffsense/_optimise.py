@@ -271,7 +271,6 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
     (_, (lo, hi)), = problem.params.items()
     if problem.estimator.kind == "hard":
         return hard_grid_solve(ev.e_hard, (lo, hi), steps=problem.steps, max_evaluations=problem.solve.max_evaluations)
-    ev.prepare(("hard", "soft") if on_hard else ("hard", "soft", "reference"))  # compiled together
     e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
     # Under a probabilistic detection law the sweep, the answer and the polish are judged on
     # E_ref, the expectation the estimator approximates; under the threshold law E_ref is E_hard.

@@ -7,7 +7,6 @@ the same way; `CompileClock` sums them while it is active.
 
 from __future__ import annotations
 
-import threading
 import time
 
 from jax import monitoring
@@ -17,7 +16,6 @@ _COMPILE_EVENTS = (
     "/jax/core/compile/jaxpr_to_mlir_module_duration",
     "/jax/core/compile/backend_compile_duration",
     "/diffsense/executables/load_duration",  # a compiled program loaded (diffsense._executables)
-    "/diffsense/executables/parallel_compile_duration",  # programs compiled side by side (ditto)
 )
 
 _active: list["CompileClock"] = []
@@ -29,11 +27,8 @@ _BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
 
 def _listener(event: str, duration_s: float, **_: object) -> None:
     if event in _COMPILE_EVENTS:
-        # Programs compiled side by side in worker threads (`diffsense._executables.prepare`)
-        # overlap: their wall time comes as one PARALLEL_COMPILE event from the main thread.
-        in_worker = threading.current_thread() is not threading.main_thread()
         for clock in _active:
-            clock.compile_s += 0.0 if in_worker else duration_s
+            clock.compile_s += duration_s
             # A program reached the backend: compiled, or loaded from the persistent cache.
             clock.backend_compiles += event == _BACKEND_COMPILE
 

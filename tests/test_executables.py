@@ -60,17 +60,6 @@ def test_a_stored_program_is_loaded_without_tracing_and_gives_the_same_bits(fold
     np.testing.assert_allclose(float(again[0]), 2.5 * np.sum((xs - 0.3) ** 2), rtol=1e-12)
 
 
-def test_programs_prepared_together_are_stored_and_then_called_without_tracing(folder):
-    x = jnp.linspace(0.0, 1.0, 5)
-    _executables.prepare([(_bowl, (x, 1.0)), (_bowl, (x, 4.0)), (_bowl, (x, 1.0))])  # the repeat once
-    assert len(_files(folder)) == 2
-    _traces.clear()
-    values = [float(call(_bowl, x, scale)[0]) for scale in (1.0, 4.0)]
-    assert not [name for name in _traces if "_bowl" in name]
-    base = np.sum((np.linspace(0.0, 1.0, 5) - 0.3) ** 2)
-    np.testing.assert_allclose(values, [base, 4.0 * base], rtol=1e-12)
-
-
 def test_each_static_value_and_shape_has_a_program_of_its_own(folder):
     x = jnp.arange(4.0)
     two, three = call(_bowl, x, 2.0)[0], call(_bowl, x, 3.0)[0]

@@ -10,7 +10,7 @@ its data in as constants.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense._distributed import to_host
-from diffsense._executables import call, prepare
+from diffsense._executables import call
 from diffsense.metrics import ReferenceEvaluation, is_deterministic
 
 
@@ -85,16 +85,6 @@ class Evaluator:
             if self._progress:
                 self._progress("hard", float(np.sqrt(max(float(self._hard[key].e2), 0.0))), 0.0)
         return self._hard[key]
-
-    def prepare(self, kinds: Sequence[str]) -> None:
-        """Have the programs of `kinds` ("soft", "hard", "reference") ready before the first
-        evaluation asks for them: loaded from the command line's folder of compiled programs,
-        or compiled there together, on the machine's cores at once (`diffsense._executables`)."""
-        x = jnp.zeros((len(self.objective.names),), self.dtype)
-        tau = jnp.asarray(1.0, self.dtype)
-        programs = {"soft": (_value_and_grad, (self.objective, x, tau)), "hard": (_hard, (self.objective, x)),
-                    "reference": (_reference, (self.objective, x))}
-        prepare([programs[kind] for kind in kinds])
 
     def breakdown(self, x) -> dict[str, Any]:
         """E_hard at x broken down by scenario, horizon step and coverage, with the "tracked"
