@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 import jax
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -184,10 +185,12 @@ def main() -> None:
         print_solve_against_dense(measured["solve_vs_dense"])
 
         print("\n3. far background traffic (100 vehicles per scenario)")
-        solve_s = measured["solve_vs_dense"]["solve"]["wall_s"]
         bg_problem = ds.Problem.from_toml(None, variants=args.variants, background_vehicles=100, **scenarios)
         bg = build_and_search(bg_problem, predictor)
-        _, bg_s = timed_search(bg_problem, bg)
+        # The two searches in turn, three times each, medians: one timing each was at the mercy of
+        # whatever the machine did at that moment (a first one at 5.6 s, a later one at 3.8 s).
+        pairs = [(timed_search(problem, E)[1], timed_search(bg_problem, bg)[1]) for _ in range(3)]
+        solve_s, bg_s = (float(np.median(column)) for column in zip(*pairs))
         measured["background"] = {"vehicles_kept": int(E.data.scenes.num_vehicles), "wall_s": solve_s,
                                   "vehicles_kept_with_100": int(bg.data.scenes.num_vehicles), "wall_s_with_100": bg_s}
         print(f"{'scene':<26} {'V kept':>7} {'solve wall s':>13}")
