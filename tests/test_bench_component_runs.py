@@ -18,6 +18,7 @@ def _run(*args: str) -> str:
     return out.stdout
 
 
+@pytest.mark.slow
 def test_bench_scene_runs():
     text = _run("benchmarks/bench_scene.py", "--variants", "2", "--repeats", "1", "--background", "10")
     assert "all six" in text and "relevant set of sc01" in text
