@@ -2,19 +2,19 @@
 
 JAX's persistent compilation cache saves the backend compilation, but it finds an entry by the
 lowered program, so every run still traces and lowers each program to look it up: about a
-second for the objective's value-and-gradient and hard programs together. `compiled(fn, *args)`
+second for the objective's value-and-gradient and hard programs together. `call(fn, *args)`
 keeps the compiled executable itself, in a folder the command line sets (`keep_in`), under a
 key computed without tracing: the function's name, the arguments' structure, shapes and static
-values, a digest
-of this package's source files, the versions of the libraries that trace it, JAX's settings and
-the machine's processor. A warm run loads the executable and calls it.
+values, a digest of this package's source files, the versions of the libraries that trace it,
+JAX's settings and the machine's processor. A warm run loads the executable and calls it.
 
 The folder is trusted as JAX's own cache folder is: an executable is loaded from a pickle there
-(`jax.experimental.serialize_executable`), so it must be the user's own. Anything unusual (no
-folder set, several devices or processes, a traced argument, a static value without an exact
-text, a node type from
-outside the libraries named in `_TRUSTED_MODULES`, a file that does not load) falls back to
-`equinox.filter_jit`, as the library does without the command line.
+(`jax.experimental.serialize_executable`), so it must be the user's own. Storing and loading use
+two of JAX's private names (`jax._src.compiler.compile_or_get_cached`, the unpickler of
+`serialize_executable`); the key holds JAX's version. Anything unusual (no folder set, several
+devices or processes, a traced argument, a static value without an exact text, a node type from
+outside the libraries named in `_TRUSTED_MODULES`, a file that does not load, a failure to
+store) falls back to `equinox.filter_jit`, as the library does without the command line.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ _LIBRARIES = ("jax", "jaxlib", "flax", "equinox", "numpy", "optimistix", "lineax
 
 
 def keep_in(folder: Path | None) -> None:
-    """Keep compiled executables in `folder` (None: keep none; every call compiles with jax.jit)."""
+    """Keep compiled executables in `folder` (None: keep none; `call` is `equinox.filter_jit`)."""
     global _folder
     _folder = None if folder is None else Path(folder)
     _memory.clear()
@@ -61,9 +61,7 @@ def call(fn: Callable[..., Any], *args: Any) -> Any:
     leaves, treedef = jax.tree.flatten(dynamic)
     statics = _stable_repr(jax.tree.leaves(static))
     if statics is None or not _cacheable(leaves, treedef, jax.tree.structure(static)):
-        if fn not in _jitted:
-            _jitted[fn] = eqx.filter_jit(fn)
-        return _jitted[fn](*args)
+        return _filter_jit(fn)(*args)
     avals = tuple((leaf.shape, str(leaf.dtype), bool(getattr(leaf, "weak_type", False))) for leaf in leaves)
     memory_key = (fn, treedef, avals, jax.tree.structure(static), statics)
     if memory_key not in _memory:
@@ -76,8 +74,17 @@ def call(fn: Callable[..., Any], *args: Any) -> Any:
 
         # Named after fn (its module name in XLA's dumps and profiles) and its key.
         program.__name__ = program.__qualname__ = f"{fn.__name__}_{key[:16]}"
-        _memory[memory_key] = _load(path, in_tree) or _compile_and_store(program, dynamic, path)
+        try:
+            _memory[memory_key] = _load(path, in_tree) or _compile_and_store(program, dynamic, path)
+        except Exception:  # JAX's private names changed, say: compile as the library does
+            return _filter_jit(fn)(*args)
     return _memory[memory_key](dynamic)
+
+
+def _filter_jit(fn: Callable[..., Any]) -> Callable[..., Any]:
+    if fn not in _jitted:
+        _jitted[fn] = eqx.filter_jit(fn)
+    return _jitted[fn]
 
 
 def _stable_repr(statics: list[Any]) -> str | None:

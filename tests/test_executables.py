@@ -163,3 +163,13 @@ def test_programs_stored_beside_jax_s_cache_load_in_a_new_process(tmp_path):
     # first: 3 * 3 (x = 3 where arange(7) < 3); second: 2 * 3 * 5 + 4 * 1 (arange(9) > 3 at 5 places)
     assert outputs == [["9.0", "34.0"]] * 3
     assert len(_files(folder)) == 1
+
+
+def test_a_failure_to_compile_for_the_folder_falls_back_to_the_library_s_jit(folder, monkeypatch):
+    def broken(*_):
+        raise TypeError("a private name of JAX changed")
+
+    monkeypatch.setattr(_executables, "_compile_and_store", broken)
+    value = call(_bowl, jnp.arange(3.0), 2.0)[0]
+    np.testing.assert_allclose(float(value), 2.0 * np.sum((np.arange(3.0) - 0.3) ** 2), rtol=1e-12)
+    assert _files(folder) == []
