@@ -21,8 +21,8 @@ from diffsense import config as cfgio
 from diffsense._answer import near_optimal
 from diffsense._breakdown import breakdown, tracked_summary
 from diffsense._distributed import to_host
-from diffsense._executables import call
 from diffsense._domain import domain_check, domain_note
+from diffsense._executables import call
 from diffsense._problem import Problem
 from diffsense._result import Curves, Result
 from diffsense._timing import CompileClock

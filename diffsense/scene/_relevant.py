@@ -13,7 +13,6 @@ largest count in the batch, so the cost downstream does not grow with far traffi
 
 from __future__ import annotations
 
-
 import jax
 import jax.numpy as jnp
 import numpy as np
