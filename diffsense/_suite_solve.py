@@ -106,10 +106,13 @@ class ParetoFront:
         currency: the cost model's currency.
         lambdas: the cost weights, in sweep order [m per currency unit].
         designs: each lambda's box solve (r*, E_hard, cost, dJ/dr and bounds at r*).
-        on_front: whether each design is non-dominated in (E_hard, cost) among the designs.
-        cloud: (cost, E_hard [m]) of every point the sweep evaluated on the hard objective.
+        on_front: whether each design is non-dominated in (E, cost) among the designs.
+        cloud: (cost, E [m]) of every point the sweep evaluated on the hard objective.
         counts: distinct soft (value and gradient) and hard evaluations of the whole sweep.
         wall_s: the sweep's wall time [s], the objective's construction included.
+        judged_on: which E the designs, the front and the cloud hold: "E_hard" (the threshold law,
+            or the hard estimator), or "E_ref" (a probabilistic detection law: the expectation of
+            the hard objective over detection draws, as the one-parameter solve judges).
     """
 
     sensor: str
@@ -121,20 +124,22 @@ class ParetoFront:
     cloud: tuple[tuple[float, float], ...]
     counts: dict[str, int]
     wall_s: float
+    judged_on: str = "E_hard"
 
     def front(self) -> list[int]:
         """Indices of the non-dominated designs, cheapest first."""
         return sorted((i for i, f in enumerate(self.on_front) if f), key=lambda i: self.designs[i].cost)
 
     def to_dict(self) -> dict[str, Any]:
-        """pareto.json's content."""
-        designs = [{"lambda": lam, "r_star": d.x_star, "E_hard_m": d.E_hard, "E_soft_m": d.E_soft, "cost": d.cost,
+        """pareto.json's content: E [m] under the key `<judged_on>_m` ("E_hard_m" or "E_ref_m")."""
+        key = f"{self.judged_on}_m"
+        designs = [{"lambda": lam, "r_star": d.x_star, key: d.E_hard, "E_soft_m": d.E_soft, "cost": d.cost,
                     "J": d.J_star, "on_front": f, "on_bound": d.on_bound, "gradient": d.gradient, "source": d.source,
                     "evaluations": d.counts}
                    for lam, d, f in zip(self.lambdas, self.designs, self.on_front)]
-        return {"sensor": self.sensor, "currency": self.currency, "units": self.units, "lambdas": list(self.lambdas),
+        return {"sensor": self.sensor, "judged_on": self.judged_on, "currency": self.currency, "units": self.units, "lambdas": list(self.lambdas),
                 "designs": designs, "front": self.front(), "evaluations": self.counts, "wall_s": self.wall_s,
-                "cloud": {"cost": [c for c, _ in self.cloud], "E_hard_m": [e for _, e in self.cloud]}}
+                "cloud": {"cost": [c for c, _ in self.cloud], key: [e for _, e in self.cloud]}}
 
 
 def check_lambdas(lambdas: Sequence[float]) -> tuple[float, ...]:
@@ -164,13 +169,15 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
     E = objective(problem, predictor=predictor) if E is None else E
     ev, fns, start = _functions(problem, E, on_evaluation, _planned(problem, len(lambdas)))
     config = dataclasses.replace(problem.box, seed=problem.seed)
+    judged_on = "E_hard" if _on_hard(problem, E) else "E_ref"
 
     def solved(k: int, lam: float, result: BoxResult) -> None:
-        say(f"{problem.sensor_kind}: lambda {lam:g} ({k + 1}/{len(lambdas)}): E_hard {result.E_hard:.4f} m, "
+        say(f"{problem.sensor_kind}: lambda {lam:g} ({k + 1}/{len(lambdas)}): {judged_on} {result.E_hard:.4f} m, "
             f"cost {result.cost:.2f}, {result.counts['soft']} value-and-gradient + {result.counts['hard']} hard")
 
     designs, on_front = pareto_sweep(fns, problem.params, lambdas, config, extra_starts=[start], on_solved=solved)
     cloud = tuple((fns.cost(e.x)[0], e.value) for e in fns.history if e.kind == "hard")
     return ParetoFront(sensor=problem.sensor_kind, units={n: s.unit for n, s in problem.specs().items()},
                        currency=load_costs(problem.costs).currency, lambdas=lambdas, designs=designs,
-                       on_front=on_front, cloud=cloud, counts=dict(fns.counts), wall_s=time.perf_counter() - t0)
+                       on_front=on_front, cloud=cloud, counts=dict(fns.counts), wall_s=time.perf_counter() - t0,
+                       judged_on=judged_on)

@@ -6,6 +6,7 @@ bad cost weights are refused in one line."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import jax
@@ -14,7 +15,7 @@ import pytest
 
 import diffsense as ds
 from diffsense._io import output_set
-from diffsense.metrics import make_objective
+from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.report import PARETO_FILES, pareto_table, plot_pareto, write_pareto
 from diffsense.solve import BoxConfig
 from diffsense.tracks import prediction_frames
@@ -86,3 +87,28 @@ def test_bad_cost_weights_are_refused(lambdas, match):
     problem = ds.Problem(sensor=["radar", "camera"], params=PARAMS)
     with pytest.raises(ds.InputError, match=match):
         ds.pareto(problem, lambdas)
+
+
+def test_the_json_names_the_objective_its_values_are(swept, tmp_path):
+    front, _, _ = swept  # the shipped threshold laws: the hard objective
+    assert front.judged_on == "E_hard" and "E_hard_m" in front.to_dict()["designs"][0]
+    # under a probabilistic law the same numbers are E_ref, and every reader says so
+    as_ref = dataclasses.replace(front, judged_on="E_ref")
+    content = as_ref.to_dict()
+    assert content["judged_on"] == "E_ref" and "E_hard_m" not in json.dumps(content)
+    assert [d["E_ref_m"] for d in content["designs"]] == [d.E_hard for d in front.designs]
+    assert content["cloud"]["E_ref_m"] == [e for _, e in front.cloud]
+    assert pareto_table(content).splitlines()[1].split()[:3] == ["lambda", "E_ref", "[m]"]
+    assert len(plot_pareto(tmp_path / "ref.png", content, "t")) == len(LAMBDAS)
+
+
+def test_a_sweep_under_random_laws_is_judged_on_the_reference():
+    problem = ds.Problem.from_suite("configs/suites/radar_camera_laws_d2.toml",
+                                    estimator=EstimatorConfig(reference_draws=2),
+                                    box=BoxConfig(samples=3, starts=1, tau_schedule=(1.0,), max_steps=1, max_soft=2))
+    scenes, scenario = toy_scenes(1)
+    frames = prediction_frames(scenes.num_frames)[:2]
+    E = make_objective(scenes, scenario, frames, problem.make_sensor(), ToyPredictor(jax.numpy.asarray(TOY_GAIN)),
+                       names=tuple(problem.params), key=jax.random.key(2, impl="rbg"), estimator=problem.estimator)
+    front = ds.pareto(problem, (0.0, 0.05), E=E)
+    assert front.judged_on == "E_ref" and "E_ref_m" in front.to_dict()["cloud"]
