@@ -1,0 +1,59 @@
+"""Kills of the survivors of the third sensors mutation sample (seed 2, docs/mutation.md): the
+bounds of the sensor configs' checks and the errors that name them, and the camera's resolvable
+range in the boresight report.
+
+Hand values: the shipped camera (HFOV 30 deg, 1280 px, min_width_px 10) has k = 1280 / (pi / 6)
+= 2444.6 px/rad, so a 1.8 m wide car is 10 px wide at R = 1.8 k / 10 = 440.0 m (small angle); the
+paper radar's gain is that of a 30 x 15 deg beam, 17.4039 dBi (tests/test_sensors_radar_pinned.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from test_sensor_scenes import make_scene
+
+from diffsense.errors import InputError
+from diffsense.sensors._detect import p_detect
+from diffsense.sensors._inspect import boresight_report
+from diffsense.sensors._params import load_config
+from diffsense.sensors._radar import radar_gain_dbi
+
+
+def test_the_camera_resolves_a_car_out_to_where_it_is_min_width_px_wide():
+    # 2 atan(w / 2R) k = min_width_px; for a 2 mrad angle, R = w k / min_width_px to 1.4e-6.
+    config = load_config("camera")
+    k = 1280.0 / math.radians(30.0)
+    report = boresight_report(config.params, config, 50.0)
+    assert report["resolvable_range_m"] == pytest.approx(1.8 * k / 10.0, rel=1e-5)
+    assert report["resolvable_range_m"] == pytest.approx(440.03, abs=0.01)
+    at_limit = boresight_report(config.params, config, report["resolvable_range_m"])
+    assert at_limit["width_px_at_range"] == pytest.approx(10.0, rel=1e-12)
+
+
+def test_a_radar_gain_beam_may_be_the_full_circle():
+    # A 360 deg beam is 12 times the 30 deg one: 10 log10(12) = 10.7918 dB less gain.
+    config = dataclasses.replace(load_config("radar", None, "paper"), gain_beam_deg=360.0)
+    assert float(radar_gain_dbi(config.params, config)) == pytest.approx(17.4039 - 10.7918, abs=1e-4)
+    with pytest.raises(InputError, match=r"gain_beam_deg must be in \(0, 360\]"):
+        dataclasses.replace(config, gain_beam_deg=360.5)
+
+
+def test_a_camera_may_ask_for_the_whole_car_visible():
+    # min_visible_fraction 1: a lone car, unhidden, has the margin 1 - 1 = 0 and is seen (hard).
+    config = dataclasses.replace(load_config("camera"), min_visible_fraction=1.0)
+    scene = make_scene([[0.0, 20.0]], [[0.0, 0.0]])
+    np.testing.assert_array_equal(np.asarray(p_detect(scene, config.params, config, mode="hard")), [[1.0, 1.0]])
+    with pytest.raises(InputError, match=r"min_visible_fraction must be in \[0, 1\]"):
+        dataclasses.replace(config, min_visible_fraction=1.01)
+
+
+def test_a_bad_constant_is_refused_by_name():
+    radar, camera = load_config("radar"), load_config("camera")
+    with pytest.raises(InputError, match="radar system_loss_db must be >= 0"):
+        dataclasses.replace(radar, system_loss_db=-1.0)
+    with pytest.raises(InputError, match="camera temperature width_px must be > 0"):
+        dataclasses.replace(camera.temperature, width_px=0.0)
