@@ -1,10 +1,11 @@
 """Kills of the survivors of the third sensors mutation sample (seed 2, docs/mutation.md): the
-bounds of the sensor configs' checks and the errors that name them, and the camera's resolvable
-range in the boresight report.
+bounds of the sensor configs' checks and the errors that name them, the camera's resolvable
+range in the boresight report, and its fog and rain range kept in the scene's float type.
 
 Hand values: the shipped camera (HFOV 30 deg, 1280 px, min_width_px 10) has k = 1280 / (pi / 6)
 = 2444.6 px/rad, so a 1.8 m wide car is 10 px wide at R = 1.8 k / 10 = 440.0 m (small angle); the
-paper radar's gain is that of a 30 x 15 deg beam, 17.4039 dBi (tests/test_sensors_radar_pinned.py).
+paper radar's gain is that of a 30 x 15 deg beam, 17.4039 dBi (tests/test_sensors_radar_pinned.py);
+rain of 25 mm/h alone gives a visibility of 1827 m (diffsense/sensors/_weather.py, tests/test_weather.py).
 """
 
 from __future__ import annotations
@@ -12,11 +13,13 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from test_sensor_scenes import make_scene
 
 from diffsense.errors import InputError
+from diffsense.sensors import Weather
 from diffsense.sensors._detect import p_detect
 from diffsense.sensors._inspect import boresight_report
 from diffsense.sensors._params import load_config
@@ -57,3 +60,14 @@ def test_a_bad_constant_is_refused_by_name():
         dataclasses.replace(radar, system_loss_db=-1.0)
     with pytest.raises(InputError, match="camera temperature width_px must be > 0"):
         dataclasses.replace(camera.temperature, width_px=0.0)
+
+
+def test_the_cameras_weather_range_is_in_the_scenes_float_type():
+    # Weather values arrive as arrays of E's type (float64 here); a float32 scene's range limit
+    # stays float32. Extinctions add, so visibilities add as reciprocals: 1 / (1/300 + 1/1827.06).
+    rate, fog = jnp.asarray(25.0, jnp.float64), jnp.asarray(300.0, jnp.float64)
+    rain = Weather(rain_mm_h=rate).camera_range_m(jnp.float32)
+    both = Weather(rain_mm_h=rate, fog_visibility_m=fog).camera_range_m(jnp.float32)
+    assert rain.dtype == both.dtype == jnp.float32
+    assert float(rain) == pytest.approx(1827.06, abs=0.05)
+    assert float(both) == pytest.approx(1.0 / (1.0 / 300.0 + 1.0 / float(rain)), rel=1e-5)
