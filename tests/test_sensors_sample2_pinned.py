@@ -21,7 +21,9 @@ from test_sensor_scenes import make_scene
 from diffsense.errors import InputError
 from diffsense.sensors import Weather
 from diffsense.sensors._detect import p_detect
+from diffsense.sensors._geometry import Tracks, polar
 from diffsense.sensors._inspect import boresight_report
+from diffsense.sensors._mount import mount_of
 from diffsense.sensors._params import load_config
 from diffsense.sensors._radar import radar_gain_dbi
 
@@ -71,3 +73,14 @@ def test_the_cameras_weather_range_is_in_the_scenes_float_type():
     assert rain.dtype == both.dtype == jnp.float32
     assert float(rain) == pytest.approx(1827.06, abs=0.05)
     assert float(both) == pytest.approx(1.0 / (1.0 / 300.0 + 1.0 / float(rain)), rel=1e-5)
+
+
+def test_a_yaw_in_degrees_turns_the_boresight_by_that_many_degrees():
+    # The radar (4.2 m ahead of the ego's centre) turned 90 deg left: a car 15 m to its left is
+    # on the boresight, one 15 m ahead of it is 90 deg to its right.
+    config = load_config("radar")
+    mount = mount_of(dataclasses.replace(config.params, yaw_deg=90.0), config)
+    scene = make_scene([[0.0, 4.2, 19.2]], [[0.0, 15.0, 0.0]])
+    range_m, azimuth_rad = polar(Tracks.of(scene), mount)
+    np.testing.assert_allclose(np.asarray(range_m)[1:, 0], [15.0, 15.0], rtol=1e-12)
+    np.testing.assert_allclose(np.degrees(np.asarray(azimuth_rad)[1:, 0]), [0.0, -90.0], atol=1e-6)
