@@ -11,7 +11,8 @@ TOML at --law-config; default configs/sensors/laws/<sensor>_*.toml), at each HFO
                  vehicle), with its Monte-Carlo standard error (`Objective.reference`)
     E_hard       each detection decided by its probability's median (p >= 1/2)
     mean-field   one pass on expected histories
-    relaxed-reference  the default estimator under a probabilistic law: E_ref's own draws, relaxed
+    relaxed-reference  E_ref's own draws, relaxed (the default under a probabilistic law for
+                 several parameters; for one, straight-through: E_ref's value, this gradient)
     mc           --mc-samples relaxed-Bernoulli samples (temperature 0.5); 0 skips it
 
 and each estimator's bias E - E_ref, also in units of E_ref's standard error. --grid compares

@@ -1,8 +1,9 @@
-"""The relaxed-reference temperature against issue #13's targets, over seeds.
+"""The relaxed-reference (or straight-through) temperature against issue #13's targets, over seeds.
 
     nice -n 10 python benchmarks/bench_relaxation.py [--sensor radar] [--grid LO:HI:STEP ...]
         [--temperatures 0.01,0.003,0.001,0.0001] [--seeds 0] [--solve LO:HI ...]
-        [--solve-temperatures 0.01,0.001] [--tau-schedule 4,2,1] [--json PATH]
+        [--solve-temperatures 0.01,0.001] [--tau-schedule 4,2,1]
+        [--estimator relaxed-reference|straight-through] [--json PATH]
 
 For each seed (scene variants, measurement noise and the reference's uniforms), on the problem of
 `bench_detection.py` (sc01, 1 variant, the sensor's probabilistic law, K = --draws):
@@ -52,7 +53,7 @@ def agreement(args, seed) -> list[dict]:
     from diffsense.metrics import EstimatorConfig
     from diffsense.solve import Evaluator
 
-    unit = EstimatorConfig(kind="relaxed-reference", reference_draws=args.draws, reference_temperature=1.0)
+    unit = EstimatorConfig(kind=args.estimator, reference_draws=args.draws, reference_temperature=1.0)
     E = ds.objective(_problem(args, args.law, seed=seed, estimator=unit))
     ev = Evaluator(E)
     out = []
@@ -94,7 +95,7 @@ def solves(args, seed, grids) -> list[dict]:
         else:
             best = float(min(known["E_ref"]))
         for lam in args.solve_temperatures:
-            est = EstimatorConfig(reference_draws=args.draws, reference_temperature=lam)
+            est = EstimatorConfig(kind=args.estimator, reference_draws=args.draws, reference_temperature=lam)
             problem = _problem(args, args.law, seed=seed, params={_param(args): (lo, hi)}, estimator=est)
             if args.tau_schedule:
                 schedule = tuple(float(v) for v in args.tau_schedule.split(","))
@@ -102,7 +103,7 @@ def solves(args, seed, grids) -> list[dict]:
             t0 = time.perf_counter()
             result = ds.optimise(problem, figures=False)
             ref = result.reference
-            row = {"seed": seed, "interval": text, "lambda": lam, "tau_schedule": list(problem.solve.tau_schedule),
+            row = {"seed": seed, "interval": text, "estimator": args.estimator, "lambda": lam, "tau_schedule": list(problem.solve.tau_schedule),
                    "grid_best_E_ref": best,
                    "r_star": next(iter(result.r_star.values())), "E_ref_star": ref["E_ref_star"],
                    "E_ref_star_se": ref["E_ref_star_se"], "rel_to_grid_best": ref["E_ref_star"] / best - 1.0,
@@ -124,6 +125,8 @@ def main() -> None:
     p.add_argument("--solve-temperatures", default="0.01", help="lambda [logit units] of the solves; '' for none")
     p.add_argument("--tau-schedule", default="",
                    help="the solves' continuation, multipliers of lambda, largest first (default: the config's)")
+    p.add_argument("--estimator", default="relaxed-reference", choices=("relaxed-reference", "straight-through"),
+                   help="the estimator of the grids and solves (straight-through: E_ref forward, relaxed backward)")
     p.add_argument("--json", type=Path)
     args = p.parse_args()
     args.law = _law(args)

@@ -176,9 +176,11 @@ def _dense_check(ev: Evaluator, result, lo: float, hi: float, step: float) -> di
 
 
 def _reference_summary(ev: Evaluator, problem: Problem, r_star: float, on_hard: bool) -> dict[str, Any]:
-    """result.json's "reference": E_ref at r* with its standard error, and what the answer was judged on."""
+    """result.json's "reference": E_ref at r* with its standard error, what the answer was judged
+    on, and the estimator asked for and the one it stands for ("auto" resolved)."""
     ref = ev.reference(r_star)
-    return {"answer_on": "E_hard" if on_hard else "E_ref", "estimator": problem.estimator.kind,
+    used = getattr(ev.objective, "estimator_kind", problem.estimator.kind)
+    return {"answer_on": "E_hard" if on_hard else "E_ref", "estimator": problem.estimator.kind, "estimator_used": used,
             "E_ref_star": float(ref.e), "E_ref_star_se": float(ref.e_se), "draws": int(ref.draws.size)}
 
 

@@ -51,8 +51,8 @@ class Problem:
         fill: missing-detection policy: "zero", "hold" or "interp" (None: the profile's, "hold"
             for physical, the paper's "zero" for paper).
         estimator: how detection uncertainty enters ("auto", "mean-field", "mc",
-            "relaxed-reference", "hard", or an `EstimatorConfig` with its knobs; see
-            `diffsense.metrics.EstimatorConfig`).
+            "relaxed-reference", "straight-through", "hard", or an `EstimatorConfig` with its
+            knobs; see `diffsense.metrics.EstimatorConfig`).
         prediction_stride_frames: one prediction instant every this many scene frames [-].
         background_vehicles: if > 0, replaces every scenario's count of far background vehicles.
         float64: compute E(r) in float64 (enables JAX's x64 mode when needed).

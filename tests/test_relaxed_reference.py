@@ -3,6 +3,8 @@ objective tends to the reference itself as its temperature falls (`diffsense.met
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -63,9 +65,15 @@ def test_gradient_matches_float64_central_differences(relaxed):
         np.testing.assert_allclose(float(value), float(e2(relaxed, r, 1.0)), rtol=1e-12)
 
 
-def test_auto_is_relaxed_reference_under_a_random_law_and_mean_field_otherwise(relaxed):
+def test_auto_under_a_random_law_and_mean_field_otherwise(relaxed):
+    # one free parameter: straight-through (E_ref's value); several: relaxed-reference
     auto = radar_objective(kind="auto", draws=4)
-    assert float(e2(auto, 10.0, 1.0)) == float(e2(relaxed, 10.0, 1.0))
+    assert auto.estimator_kind == "straight-through"
+    assert float(e2(auto, 10.0, 1.0)) == pytest.approx(float(reference(auto, 10.0).e2), rel=1e-12)
+    assert float(e2(auto, 10.0, 1.0)) != float(e2(relaxed, 10.0, 1.0))
+    two = dataclasses.replace(auto, names=(H, "range_m"))
+    assert two.estimator_kind == "relaxed-reference"
+    assert float(e2(two, 10.0, 1.0)) == float(e2(relaxed, 10.0, 1.0))
     threshold = sensor.Radar.from_toml()
     a = radar_objective(threshold, kind="auto", draws=4)
     m = radar_objective(threshold, kind="mean-field", draws=4)
@@ -97,11 +105,11 @@ CAMERA_LAW = sensor.Camera(cfg.replace(sensor.load_config("camera"), detection=C
 
 
 def test_camera_gradients_and_extremes():
-    # The confidence camera through the whole objective with its default estimator
-    # (relaxed-reference): against float64 central differences at 20 deg (draws on the image's
+    # The confidence camera through the whole objective with relaxed-reference (the default for
+    # several parameters): against float64 central differences at 20 deg (draws on the image's
     # edge) and 40 deg, and finite at HFOV 0.01/360 deg x range 0.1/1000 m. One compiled
     # program (HFOV and range) serves both checks.
-    camera = radar_objective(CAMERA_LAW, kind="auto", draws=4)
+    camera = radar_objective(CAMERA_LAW, kind="relaxed-reference", draws=4)
     assert np.ptp(np.asarray(reference(camera, 20.0).draws)) > 0
     vg = eqx.filter_jit(lambda o, x: jax.value_and_grad(lambda v: o.e2({H: v[0], "range_m": v[1]}))(x))
     for r in (20.0, 40.0):
@@ -155,6 +163,7 @@ def test_optimise_judges_the_answer_on_the_reference_and_reports_it(monkeypatch)
     r_star = out["r_star"][H]
     ref = out["reference"]
     assert ref["answer_on"] == "E_ref" and ref["estimator"] == "auto" and ref["draws"] == 4
+    assert ref["estimator_used"] == "straight-through"
     assert ref["E_ref_star"] == ev.e_reference(r_star) and ref["E_ref_star_se"] == float(ev.reference(r_star).e_se)
     # the sweep and the answer are judged on E_ref, the answer no worse than any step
     for step in out["sweep"]:

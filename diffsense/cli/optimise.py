@@ -64,9 +64,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--predictor-dtype", choices=("auto", "float32", "float64"),
                    help="the predictor's arithmetic inside the float64 E(r) (default auto: the CS-LSTM in float32, "
                         "its weights' own precision, at half the cost; docs: speed and accuracy)")
-    p.add_argument("--estimator", choices=("auto", "mean-field", "mc", "relaxed-reference", "hard"),
-                   help="how detection uncertainty enters (auto: relaxed-reference under a probabilistic detection law, "
-                        "mean-field under the threshold law; docs: detection)")
+    # diffsense.metrics.ESTIMATORS, spelled out: the parser is built before jax is imported.
+    p.add_argument("--estimator", choices=("auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard"),
+                   help="how detection uncertainty enters (auto, under a probabilistic detection law: straight-through "
+                        "for one parameter, relaxed-reference for several; mean-field under the threshold law; "
+                        "docs: detection)")
     p.add_argument("--mc-samples", type=int, help="Monte-Carlo samples K (--estimator mc)")
     p.add_argument("--objective", choices=("eq12", "tracked"),
                    help="eq12: the paper's E over every instant; tracked: the error where the target has a "

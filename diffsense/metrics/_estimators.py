@@ -10,8 +10,17 @@
   tends to E_ref itself at every r, its argmin to E_ref's; lambda trades that bias for a
   gradient that sees more than the few draws on the edge of flipping. Under a deterministic
   detection law there is nothing to draw and it is mean-field.
-- `auto` (the default): `relaxed-reference` where the sensor declares a probabilistic detection
-  law, mean-field otherwise (the threshold law, a custom sensor).
+- `straight-through`: the value of E_ref itself (the reference's K hard draws), the gradient of
+  relaxed-reference: E_ref + (E_relaxed - stop_gradient(E_relaxed)). The value no longer trades
+  bias for smoothness, so lambda is chosen for the gradient alone. It costs relaxed-reference's
+  evaluation plus K forward passes. The straight-through is taken on the whole objective, not on
+  each draw: per draw, the gradient would be the objective's slope at the hard draw times the
+  relaxed draw's, a linearisation of the predictor across a detection's flip, where the relaxed
+  draw integrates the slope over it. Under a deterministic law it is mean-field, as
+  relaxed-reference is.
+- `auto` (the default): where the sensor declares a probabilistic detection law,
+  `straight-through` for one free parameter and `relaxed-reference` for several
+  (`Objective.estimator_kind` says why); mean-field otherwise (the threshold law, a custom sensor).
 - `hard`: the sensor's own 0/1 detections (the reference; no gradient).
 """
 
@@ -24,8 +33,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-Estimator = Literal["auto", "mean-field", "mc", "relaxed-reference", "hard"]
-ESTIMATORS: tuple[str, ...] = ("auto", "mean-field", "mc", "relaxed-reference", "hard")
+Estimator = Literal["auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard"]
+ESTIMATORS: tuple[str, ...] = ("auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard")
 
 # p is clipped this far from 0 and 1 before its logit is taken; below it a detection is certain
 # (or impossible) for any practical relaxation temperature.
@@ -37,10 +46,12 @@ class EstimatorConfig:
     """Estimator choice and its knobs.
 
     Attributes:
-        kind: "auto", "mean-field", "mc", "relaxed-reference" or "hard" (module docstring).
+        kind: "auto", "mean-field", "mc", "relaxed-reference", "straight-through" or "hard"
+            (module docstring).
         samples: K, Monte-Carlo samples for "mc" [-].
         relax_temperature: lambda of the relaxed Bernoulli for "mc" [-]; -> 0 gives hard samples.
-        reference_temperature: lambda of "relaxed-reference" at temperature multiplier 1, in
+        reference_temperature: lambda of "relaxed-reference" and "straight-through" at
+            temperature multiplier 1, in
             logit units [-]; the solver's continuation scales it like the gates' temperatures.
         reference_draws: K, Bernoulli draws per (frame, vehicle) of the reference objective
             E_ref (`Objective.reference`) [-]; unused by a deterministic detection law.
@@ -92,3 +103,18 @@ def relaxed_draw(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temperature
     `_P_CLIP` of 0 or 1.
     """
     return jax.nn.sigmoid((_clipped_logit(p) - _clipped_logit(uniform)) / temperature)
+
+
+@jax.custom_jvp
+def straight_through(hard: Float[Array, "*S"], relaxed: Float[Array, "*S"]) -> Float[Array, "*S"]:
+    """`hard`'s value (bit for bit), `relaxed`'s derivative; `hard` passes no derivative.
+
+    `relaxed`'s value is never read, so a compiled program that needs no derivative drops its
+    computation, and one that does computes it only where the derivative needs it.
+    """
+    return hard
+
+
+@straight_through.defjvp
+def _straight_through_jvp(primals, tangents):
+    return primals[0], tangents[1]

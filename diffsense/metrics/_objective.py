@@ -41,7 +41,7 @@ from jaxtyping import Array, Float
 
 from diffsense.metrics._coverage import coverage_classes, p_tracked, target_window
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
-from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli, relaxed_draw
+from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli, relaxed_draw, straight_through
 from diffsense.metrics._reference import (
     ReferenceEvaluation,
     declares_random_law,
@@ -127,6 +127,20 @@ class Objective(eqx.Module):
     def dtype(self):
         return self.data.gt_pred.dtype
 
+    @property
+    def estimator_kind(self) -> str:
+        """The estimator E's soft value is: `estimator.kind`, with "auto" resolved. Under a
+        probabilistic detection law "auto" is straight-through (E_ref's value, relaxed-reference's
+        gradient) for one free parameter, whose solve judges on E_ref and roots the gradient, and
+        relaxed-reference for several, whose BFGS line search compares values that must move
+        with the gradient; under the threshold law and for a custom sensor it is mean-field."""
+        kind = self.estimator.kind
+        if kind != "auto":
+            return kind
+        if not declares_random_law(self.sensor):
+            return "mean-field"
+        return "straight-through" if len(self.names) == 1 else "relaxed-reference"
+
     def _params(self, r: Params) -> dict[str, Array]:
         # r may come at a wider float type than the data (a float64 solver over float32 data):
         # compute at the data's.
@@ -183,9 +197,8 @@ class Objective(eqx.Module):
     def _soft_mean(self, r: Params, tau, reduce: Callable[[Array, Detections], Array]) -> Array:
         """reduce(predictions [N, I, F, 2], detections) with soft detections, averaged over the
         estimator's samples (one pass for mean-field)."""
-        kind = self.estimator.kind
-        if (kind == "relaxed-reference" and not is_deterministic(self.sensor)) or \
-                (kind == "auto" and declares_random_law(self.sensor)):
+        kind = self.estimator_kind
+        if kind in ("relaxed-reference", "straight-through") and not is_deterministic(self.sensor):
             # The reference's own events (exact occlusion geometry; a suite's members one by
             # one): under a probabilistic law p is already smooth in the sensor's parameters,
             # and only the draw needs relaxing, so the estimate tends to E_ref itself as the
@@ -197,9 +210,14 @@ class Objective(eqx.Module):
             def relax(draw):
                 us = events.uniforms(self.data.noise_key, draw)
                 return events.combine([relaxed_draw(p, u, temperature) for p, u in zip(events.p_detect, us)])
+
+            def hard(draw):
+                us = events.uniforms(self.data.noise_key, draw)
+                d = events.combine([(u < p).astype(self.dtype) for p, u in zip(events.p_detect, us)])
+                return reduce(self._predict(d), d)
         else:
             det = self.detections(r, "soft", tau)
-            if kind != "mc":
+            if kind != "mc":  # mean-field (and straight-through under a deterministic law)
                 return reduce(self._predict(det), det)
             draws = jnp.swapaxes(self.data.mc_uniform, 0, 1)
             relax = lambda u: dataclasses.replace(det, p_detect=relaxed_bernoulli(det.p_detect, u, self.estimator.relax_temperature))
@@ -212,7 +230,11 @@ class Objective(eqx.Module):
             d = relax(draw)
             return reduce(self._predict(d), d)
 
-        return jnp.mean(jax.lax.map(one_sample, draws), axis=0)
+        relaxed = jnp.mean(jax.lax.map(one_sample, draws), axis=0)
+        if kind != "straight-through":
+            return relaxed
+        # E_ref's value (the hard draws), the relaxed draws' gradient
+        return straight_through(jnp.mean(jax.lax.map(hard, draws), axis=0), relaxed)
 
     def sq_error(self, r: Params, tau: float | Array = 1.0) -> Float[Array, "N F"]:
         """The soft E^2 split by scene variant and horizon step [m^2].
