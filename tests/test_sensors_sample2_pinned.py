@@ -29,7 +29,8 @@ from diffsense.sensors._radar import radar_gain_dbi
 
 
 def test_the_camera_resolves_a_car_out_to_where_it_is_min_width_px_wide():
-    # 2 atan(w / 2R) k = min_width_px; for a 2 mrad angle, R = w k / min_width_px to 1.4e-6.
+    """440.03 m: 2 atan(w / 2R) k = min_width_px, and at a 2 mrad angle R = w k / min_width_px
+    to 1.4e-6."""
     config = load_config("camera")
     k = 1280.0 / math.radians(30.0)
     report = boresight_report(config.params, config, 50.0)
@@ -40,7 +41,8 @@ def test_the_camera_resolves_a_car_out_to_where_it_is_min_width_px_wide():
 
 
 def test_a_radar_gain_beam_may_be_the_full_circle():
-    # A 360 deg beam is 12 times the 30 deg one: 10 log10(12) = 10.7918 dB less gain.
+    """The domain (0, 360] includes 360 deg, a beam 12 times the 30 deg one: 10 log10(12) =
+    10.7918 dB less gain than its 17.4039 dBi."""
     config = dataclasses.replace(load_config("radar", None, "paper"), gain_beam_deg=360.0)
     assert float(radar_gain_dbi(config.params, config)) == pytest.approx(17.4039 - 10.7918, abs=1e-4)
     with pytest.raises(InputError, match=r"gain_beam_deg must be in \(0, 360\]"):
@@ -48,15 +50,18 @@ def test_a_radar_gain_beam_may_be_the_full_circle():
 
 
 def test_a_camera_may_ask_for_the_whole_car_visible():
-    # min_visible_fraction 1: a lone car, unhidden, has the margin 1 - 1 = 0 and is seen (hard).
+    """The domain [0, 1] includes min_visible_fraction 1: a lone car, unhidden, has the margin
+    1 - 1 = 0 and is seen in hard mode."""
     config = dataclasses.replace(load_config("camera"), min_visible_fraction=1.0)
     scene = make_scene([[0.0, 20.0]], [[0.0, 0.0]])
-    np.testing.assert_array_equal(np.asarray(p_detect(scene, config.params, config, mode="hard")), [[1.0, 1.0]])
+    p = p_detect(scene, config.params, config, mode="hard")
+    np.testing.assert_array_equal(np.asarray(p), [[1.0, 1.0]])
     with pytest.raises(InputError, match=r"min_visible_fraction must be in \[0, 1\]"):
         dataclasses.replace(config, min_visible_fraction=1.01)
 
 
 def test_a_bad_constant_is_refused_by_name():
+    """The error names the sensor and the constant (a negative loss, a zero temperature)."""
     radar, camera = load_config("radar"), load_config("camera")
     with pytest.raises(InputError, match="radar system_loss_db must be >= 0"):
         dataclasses.replace(radar, system_loss_db=-1.0)
@@ -65,8 +70,9 @@ def test_a_bad_constant_is_refused_by_name():
 
 
 def test_the_cameras_weather_range_is_in_the_scenes_float_type():
-    # Weather values arrive as arrays of E's type (float64 here); a float32 scene's range limit
-    # stays float32. Extinctions add, so visibilities add as reciprocals: 1 / (1/300 + 1/1827.06).
+    """Weather values arrive as arrays of E's type (float64 here); a float32 scene's range limit
+    stays float32: 1827.06 m for 25 mm/h of rain, and with 300 m of fog 1 / (1/300 + 1/1827.06)
+    m (extinctions add, so visibilities add as reciprocals)."""
     rate, fog = jnp.asarray(25.0, jnp.float64), jnp.asarray(300.0, jnp.float64)
     rain = Weather(rain_mm_h=rate).camera_range_m(jnp.float32)
     both = Weather(rain_mm_h=rate, fog_visibility_m=fog).camera_range_m(jnp.float32)
@@ -76,8 +82,8 @@ def test_the_cameras_weather_range_is_in_the_scenes_float_type():
 
 
 def test_a_yaw_in_degrees_turns_the_boresight_by_that_many_degrees():
-    # The radar (4.2 m ahead of the ego's centre) turned 90 deg left: a car 15 m to its left is
-    # on the boresight, one 15 m ahead of it is 90 deg to its right.
+    """The radar (4.2 m ahead of the ego's centre) turned 90 deg left: a car 15 m to its left is
+    on the boresight (azimuth 0), one 15 m ahead of it 90 deg to its right."""
     config = load_config("radar")
     mount = mount_of(dataclasses.replace(config.params, yaw_deg=90.0), config)
     scene = make_scene([[0.0, 4.2, 19.2]], [[0.0, 15.0, 0.0]])
