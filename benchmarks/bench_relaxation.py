@@ -3,7 +3,7 @@
     nice -n 10 python benchmarks/bench_relaxation.py [--sensor radar] [--grid LO:HI:STEP ...]
         [--temperatures 0.01,0.003,0.001,0.0001] [--seeds 0] [--solve LO:HI ...]
         [--solve-temperatures 0.01,0.001] [--tau-schedule 4,2,1]
-        [--estimator relaxed-reference|straight-through] [--json PATH]
+        [--estimator relaxed-reference|straight-through] [--cost-at HFOV --repeats 15] [--json PATH]
 
 For each seed (scene variants, measurement noise and the reference's uniforms), on the problem of
 `bench_detection.py` (sc01, 1 variant, the sensor's probabilistic law, K = --draws):
@@ -18,6 +18,8 @@ For each seed (scene variants, measurement noise and the reference's uniforms), 
   --solve-temperatures (its default continuation 4, 2, 1 times lambda; the answer judged on
   E_ref), E_ref(r*) against the best point of the 1-deg grid of E_ref on LO:HI (taken from an
   agreement grid LO:HI:1 when there is one) and the evaluations it used.
+- cost (--cost-at HFOV, instead of the above): the median time of one E_ref, and of each
+  estimator's value and value and gradient, over --repeats interleaved rounds.
 """
 
 from __future__ import annotations
@@ -115,6 +117,53 @@ def solves(args, seed, grids) -> list[dict]:
     return out
 
 
+def cost(args) -> list[dict]:
+    """Wall time of one evaluation at --cost-at of E_ref, and of each estimator's value and value
+    and gradient: compiled once, then --repeats rounds, each calling every program once in a
+    shuffled order; medians."""
+    import os
+    import random
+    import statistics
+
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    import diffsense as ds
+    from diffsense.metrics import EstimatorConfig
+
+    name = _param(args)
+    objs = {k: ds.objective(_problem(args, args.law, estimator=EstimatorConfig(kind=k, reference_draws=args.draws)))
+            for k in ("relaxed-reference", "straight-through")}
+    value = eqx.filter_jit(lambda o, r: o.e2({name: r}))
+    vg = eqx.filter_jit(lambda o, r: jax.value_and_grad(lambda x: o.e2({name: x}))(r))
+    ref = eqx.filter_jit(lambda o, r: o.reference({name: r}).e2)
+    r = jnp.asarray(args.cost_at)
+    programs = {"E_ref": lambda: ref(objs["relaxed-reference"], r)}
+    for k, o in objs.items():
+        programs[f"{k} value"] = lambda o=o: value(o, r)
+        programs[f"{k} value+grad"] = lambda o=o: vg(o, r)
+    for f in programs.values():
+        jax.block_until_ready(f())
+    times = {k: [] for k in programs}
+    order = list(programs)
+    for _ in range(args.repeats):
+        random.shuffle(order)
+        for k in order:
+            t0 = time.perf_counter()
+            jax.block_until_ready(programs[k]())
+            times[k].append(time.perf_counter() - t0)
+    print(f"load average (1, 5, 15 min) after the rounds: {os.getloadavg()}")
+    print(f"| program (HFOV {args.cost_at:g} deg, K = {args.draws}) | median [ms] | / E_ref |\n|---|---|---|")
+    base = statistics.median(times["E_ref"])
+    rows = []
+    for k, v in times.items():
+        m = statistics.median(v)
+        rows.append({"program": k, "median_s": m, "ratio_to_E_ref": m / base})
+        print(f"| {k} | {1e3 * m:.1f} | {m / base:.2f} |")
+    return rows
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     problem_args(p)
@@ -127,12 +176,20 @@ def main() -> None:
                    help="the solves' continuation, multipliers of lambda, largest first (default: the config's)")
     p.add_argument("--estimator", default="relaxed-reference", choices=("relaxed-reference", "straight-through"),
                    help="the estimator of the grids and solves (straight-through: E_ref forward, relaxed backward)")
+    p.add_argument("--cost-at", type=float, metavar="HFOV",
+                   help="time E_ref and each estimator's value and value-and-gradient at this HFOV [deg] instead")
+    p.add_argument("--repeats", type=int, default=15, help="rounds of --cost-at")
     p.add_argument("--json", type=Path)
     args = p.parse_args()
     args.law = _law(args)
     args.temperatures = [float(v) for v in args.temperatures.split(",") if v]
     args.solve_temperatures = [float(v) for v in args.solve_temperatures.split(",") if v]
     report = {"args": {k: str(v) for k, v in vars(args).items()}, "agreement": [], "solve": []}
+    if args.cost_at is not None:
+        report["cost"] = cost(args)
+        if args.json:
+            args.json.write_text(json.dumps(report, indent=1))
+        return
     for seed in [int(v) for v in args.seeds.split(",")]:
         grids = agreement(args, seed)
         report["agreement"] += grids
