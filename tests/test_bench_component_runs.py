@@ -41,3 +41,12 @@ def test_bench_detection_runs_a_suite():
                 "--mc-samples", "0")
     row = next(line for line in text.splitlines() if line.startswith("r   20.00"))
     assert "E_ref" in row and "mean_field" in row and "relaxed_reference" in row, text
+
+
+@pytest.mark.slow
+def test_bench_relaxation_times_each_estimator():
+    text = _run("benchmarks/bench_relaxation.py", "--cost-at", "20", "--repeats", "1", "--draws", "2")
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    for program in ("E_ref", "relaxed-reference value", "straight-through value+grad"):
+        assert program in rows, text
+    assert rows["E_ref"].split("|")[3].strip() == "1.00"
