@@ -209,3 +209,43 @@ def test_draw_margins_of_a_suite_are_the_nearest_member_to_flipping(suite):
     assert m.shape == per_member[0].shape
     edge = (np.asarray(p[0]) > 1e-6) & (np.asarray(p[0]) < 1 - 1e-6) & (np.asarray(p[1]) > 1e-6) & (np.asarray(p[1]) < 1 - 1e-6)
     np.testing.assert_allclose(m[:, edge], np.minimum(*per_member)[:, edge], rtol=1e-6)
+
+
+def _mc(samples, lam=1e-9):
+    obj = suite_objective(kind="mc", draws=samples)
+    return dataclasses_replace(obj, estimator=dataclasses_replace(obj.estimator, samples=samples, relax_temperature=lam))
+
+
+def test_mc_draws_each_member_on_its_own():
+    # Cold, an mc sample is a draw of the members' events from the mc stream's uniforms, each
+    # member on its own, fused as the reference fuses its draws: written out here draw by draw.
+    from diffsense.metrics._coverage import p_tracked
+    from diffsense.metrics._reference import MC_STREAM
+
+    mc = _mc(6)
+
+    @eqx.filter_jit
+    def by_hand(obj, values):
+        events = detection_events(obj, _r(values), "soft", 1.0)
+        total = 0.0
+        for k in range(6):
+            us = events.uniforms(obj.data.noise_key, jnp.asarray(k), MC_STREAM)
+            det = events.combine([(u < p).astype(p.dtype) for p, u in zip(events.p_detect, us)])
+            total = total + obj._question(obj._predict(det), p_tracked(obj._target_window(det)))
+        return total / 6, us
+
+    expected, us = by_hand(mc, R_EDGE)
+    assert len(us) == 2 and not np.allclose(np.asarray(us[0]), np.asarray(us[1]))  # independent members
+    got = eqx.filter_jit(lambda o, v: o.e2(_r(v)))(mc, R_EDGE)
+    np.testing.assert_allclose(float(got), float(expected), rtol=1e-9)
+
+
+def test_mc_of_a_suite_estimates_the_reference():
+    # Many cold mc samples and many reference draws estimate the same expectation (their streams
+    # are independent): within Z combined standard errors.
+    k = 64
+    mc = _mc(k)
+    ref = eqx.filter_jit(lambda o, v: o.reference(_r(v)))(suite_objective(draws=k), R_EDGE)
+    got = float(eqx.filter_jit(lambda o, v: o.e2(_r(v)))(mc, R_EDGE))
+    se = float(ref.e2_se) * np.sqrt(2.0)
+    assert se > 0 and abs(got - float(ref.e2)) < Z * se, (got, float(ref.e2), se)

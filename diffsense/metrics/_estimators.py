@@ -4,6 +4,8 @@
 - `mc`: K Monte-Carlo samples of relaxed-Bernoulli (binary Concrete) detections at temperature
   lambda, each a differentiable near-0/1 detection pattern; the objective is their mean. The
   uniform draws are fixed by a key (common random numbers), so the estimate is deterministic in r.
+  A suite's members are drawn each on its own from their own uniforms, as E_ref draws them, and
+  a sample's track is the fusion of the members that drew a detection.
 - `relaxed-reference`: the reference's own K Bernoulli draws (the uniforms of E_ref,
   `_reference.py`), each relaxed: detection sigmoid((logit p - logit u) / lambda) in place of
   1[u < p]. As lambda -> 0 every relaxed draw becomes the reference's hard one, so the estimate

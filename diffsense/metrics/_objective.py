@@ -43,6 +43,7 @@ from diffsense.metrics._coverage import coverage_classes, p_tracked, target_wind
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
 from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli, relaxed_draw, straight_through
 from diffsense.metrics._reference import (
+    MC_STREAM,
     ReferenceEvaluation,
     declares_random_law,
     detection_events,
@@ -50,7 +51,7 @@ from diffsense.metrics._reference import (
     summarise,
 )
 from diffsense.predictors import InputSpec
-from diffsense.sensors import Sensor, Weather
+from diffsense.sensors import Sensor, Suite, Weather
 from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import FillPolicy, build_inputs, flatten_instants
 
@@ -197,30 +198,11 @@ class Objective(eqx.Module):
     def _soft_mean(self, r: Params, tau, reduce: Callable[[Array, Detections], Array]) -> Array:
         """reduce(predictions [N, I, F, 2], detections) with soft detections, averaged over the
         estimator's samples (one pass for mean-field)."""
-        kind = self.estimator_kind
-        if kind in ("relaxed-reference", "straight-through") and not is_deterministic(self.sensor):
-            # The reference's own events (exact occlusion geometry; a suite's members one by
-            # one): under a probabilistic law p is already smooth in the sensor's parameters,
-            # and only the draw needs relaxing, so the estimate tends to E_ref itself as the
-            # temperature falls.
-            events = detection_events(self, r)
-            draws = jnp.arange(self.estimator.reference_draws)
-            temperature = self.estimator.reference_temperature * jnp.asarray(tau, self.dtype)
-
-            def relax(draw):
-                us = events.uniforms(self.data.noise_key, draw)
-                return events.combine([relaxed_draw(p, u, temperature) for p, u in zip(events.p_detect, us)])
-
-            def hard(draw):
-                us = events.uniforms(self.data.noise_key, draw)
-                d = events.combine([(u < p).astype(self.dtype) for p, u in zip(events.p_detect, us)])
-                return reduce(self._predict(d), d)
-        else:
+        sampled = self._samples(r, tau)
+        if sampled is None:  # mean-field (and the drawn estimators under a deterministic law)
             det = self.detections(r, "soft", tau)
-            if kind != "mc":  # mean-field (and straight-through under a deterministic law)
-                return reduce(self._predict(det), det)
-            draws = jnp.swapaxes(self.data.mc_uniform, 0, 1)
-            relax = lambda u: dataclasses.replace(det, p_detect=relaxed_bernoulli(det.p_detect, u, self.estimator.relax_temperature))
+            return reduce(self._predict(det), det)
+        draws, relax, hard = sampled
 
         # Rematerialised: reverse mode would otherwise keep every sample's predictor activations
         # (on the default problem K = 64 asked for 35 GB); each sample's forward pass is
@@ -231,10 +213,46 @@ class Objective(eqx.Module):
             return reduce(self._predict(d), d)
 
         relaxed = jnp.mean(jax.lax.map(one_sample, draws), axis=0)
-        if kind != "straight-through":
+        if hard is None:
             return relaxed
+
+        def one_hard(draw):
+            d = hard(draw)
+            return reduce(self._predict(d), d)
+
         # E_ref's value (the hard draws), the relaxed draws' gradient
-        return straight_through(jnp.mean(jax.lax.map(hard, draws), axis=0), relaxed)
+        return straight_through(jnp.mean(jax.lax.map(one_hard, draws), axis=0), relaxed)
+
+    def _samples(self, r: Params, tau) -> tuple[Array, Callable, Callable | None] | None:
+        """The drawn estimators' samples at r: (what each sample is indexed by, sample ->
+        relaxed Detections, sample -> hard Detections for straight-through or None); None for
+        the one-pass mean-field."""
+        kind, key = self.estimator_kind, self.data.noise_key
+        if kind in ("relaxed-reference", "straight-through") and not is_deterministic(self.sensor):
+            # The reference's own events (exact occlusion geometry; a suite's members one by
+            # one): under a probabilistic law p is already smooth in the sensor's parameters,
+            # and only the draw needs relaxing, so the estimate tends to E_ref itself as the
+            # temperature falls.
+            events = detection_events(self, r)
+            temperature = self.estimator.reference_temperature * jnp.asarray(tau, self.dtype)
+            relax = lambda k: events.combine([relaxed_draw(p, u, temperature)
+                                              for p, u in zip(events.p_detect, events.uniforms(key, k))])
+            hard = lambda k: events.combine([(u < p).astype(self.dtype)
+                                             for p, u in zip(events.p_detect, events.uniforms(key, k))])
+            return jnp.arange(self.estimator.reference_draws), relax, hard if kind == "straight-through" else None
+        if kind != "mc":
+            return None
+        lam = self.estimator.relax_temperature
+        if isinstance(self.sensor, Suite):
+            # Each member drawn on its own, from its own uniforms, as E_ref draws them: a sample's
+            # track is the fusion of the members that drew a detection.
+            events = detection_events(self, r, "soft", tau)
+            relax = lambda k: events.combine([relaxed_draw(p, u, lam)
+                                              for p, u in zip(events.p_detect, events.uniforms(key, k, MC_STREAM))])
+            return jnp.arange(self.estimator.samples), relax, None
+        det = self.detections(r, "soft", tau)
+        relax = lambda u: dataclasses.replace(det, p_detect=relaxed_bernoulli(det.p_detect, u, lam))
+        return jnp.swapaxes(self.data.mc_uniform, 0, 1), relax, None
 
     def sq_error(self, r: Params, tau: float | Array = 1.0) -> Float[Array, "N F"]:
         """The soft E^2 split by scene variant and horizon step [m^2].

@@ -36,8 +36,10 @@ from diffsense.sensors import Suite
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._fusion import fuse_members
 
-# Folded into each variant's noise key to give the reference's uniforms their own stream.
+# Folded into each variant's noise key to give the reference's uniforms their own stream, and
+# the Monte-Carlo estimator's draws of a suite's members theirs (independent of the reference's).
 _REFERENCE_STREAM = 0x13
+MC_STREAM = 0x17
 
 
 @jax.tree_util.register_dataclass
@@ -83,11 +85,12 @@ def declares_random_law(sensor: Any) -> bool:
 
 
 def reference_uniforms(noise_key: Array, draw: Array, shape: tuple[int, ...], dtype,
-                       member: int | None = None) -> Float[Array, "N T V"]:
+                       member: int | None = None, stream_id: int = _REFERENCE_STREAM) -> Float[Array, "N T V"]:
     """The uniforms in [0, 1) of reference draw `draw`, one [T, V] array per variant's key
-    (suite member `member`'s own stream when given)."""
+    (suite member `member`'s own stream when given; `stream_id` MC_STREAM for the Monte-Carlo
+    estimator's draws)."""
     def one(key):
-        stream = jax.random.fold_in(jax.random.fold_in(key, _REFERENCE_STREAM), draw)
+        stream = jax.random.fold_in(jax.random.fold_in(key, stream_id), draw)
         if member is not None:
             stream = jax.random.fold_in(stream, member)
         return jax.random.uniform(stream, shape, dtype=dtype)
@@ -110,19 +113,24 @@ class DetectionEvents:
     members: tuple[int | None, ...]
     combine: Callable[[Sequence[Array]], Detections]
 
-    def uniforms(self, noise_key: Array, draw: Array) -> list[Float[Array, "N T V"]]:
-        """Each event's uniforms of reference draw `draw` (common random numbers)."""
+    def uniforms(self, noise_key: Array, draw: Array, stream_id: int = _REFERENCE_STREAM) -> list[Float[Array, "N T V"]]:
+        """Each event's uniforms of reference draw `draw` (common random numbers), or of the
+        Monte-Carlo estimator's with `stream_id` MC_STREAM."""
         p = self.p_detect[0]
-        return [reference_uniforms(noise_key, draw, p.shape[1:], p.dtype, m) for m in self.members]
+        return [reference_uniforms(noise_key, draw, p.shape[1:], p.dtype, m, stream_id) for m in self.members]
 
 
-def detection_events(objective: Any, r: Any) -> DetectionEvents:
-    """The detection events of `objective` (a `diffsense.metrics.Objective`) at r (a dict)."""
+def detection_events(objective: Any, r: Any, mode: str = "hard", tau: Any = 1.0) -> DetectionEvents:
+    """The detection events of `objective` (a `diffsense.metrics.Objective`) at r (a dict): the
+    sensor's unrelaxed probabilities ("hard", the reference's), or its relaxed gates' at the
+    temperature multiplier `tau` ("soft", the Monte-Carlo estimator's)."""
     sensor = objective.sensor
     if not isinstance(sensor, Suite):
-        det = objective._sensor_detections(r, "hard")
+        det = objective._sensor_detections(r, mode, tau)
         return DetectionEvents([det.p_detect], (None,), lambda drawn: dataclasses.replace(det, p_detect=drawn[0]))
-    views = objective._per_variant(r, lambda s, p, k, w: sensor.member_views(s, p, k, mode="hard", weather=w))
+    tau = jnp.asarray(tau).astype(objective.dtype)
+    views = objective._per_variant(
+        r, lambda s, p, k, w: sensor.member_views(s, p, k, mode=mode, temperature=tau, weather=w))
     scenes = objective.data.scenes
     return DetectionEvents([d.p_detect for d, _ in views], tuple(range(len(views))),
                            lambda drawn: fuse_members(scenes, views, drawn)[0])
