@@ -72,6 +72,7 @@ def test_under_the_threshold_law_it_is_mean_field():
     assert float(e2(a, 10.0, 1.0)) == float(e2(m, 10.0, 1.0))
 
 
+@pytest.mark.slow
 def test_the_relaxed_draws_are_computed_only_for_a_derivative(st):
     # The relaxed draws' value is never read: a value-only program is the reference's K hard
     # passes, and value-and-gradient costs what relaxed-reference's does (XLA's flop counts).

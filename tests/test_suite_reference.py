@@ -240,6 +240,7 @@ def test_mc_draws_each_member_on_its_own():
     np.testing.assert_allclose(float(got), float(expected), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_mc_of_a_suite_estimates_the_reference():
     # Many cold mc samples and many reference draws estimate the same expectation (their streams
     # are independent): within Z combined standard errors.
