@@ -77,13 +77,12 @@ def test_the_relaxed_draws_are_computed_only_for_a_derivative(st):
     # The relaxed draws' value is never read: a value-only program is the reference's K hard
     # passes, and value-and-gradient costs what relaxed-reference's does (XLA's flop counts).
     rr = radar_objective(kind="relaxed-reference", draws=DRAWS)
-    flops = _flops
     value = lambda o, r: o.e2({H: r})
     vg = lambda o, r: jax.value_and_grad(lambda x: o.e2({H: x}))(r)
     ref = lambda o, r: o.reference({H: r}).e2
     # (computing the relaxed draws' value too adds a second loop over the draws)
-    assert flops(value, st) <= 1.01 * flops(ref, st)
-    assert flops(vg, st) <= 1.01 * flops(vg, rr)
+    assert _flops(value, st) <= 1.01 * _flops(ref, st)
+    assert _flops(vg, st) <= 1.01 * _flops(vg, rr)
 
 
 def _flops(fn, o) -> float:
