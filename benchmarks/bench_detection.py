@@ -195,6 +195,28 @@ def temperature_sweep(args) -> list[dict]:
     return out
 
 
+def brent_on_reference(E, lo: float, hi: float, best: float) -> dict:
+    """scipy's bounded Brent on E_ref over [lo, hi] (`xatol` 1e-3 of the interval, as the solve's):
+    a fresh evaluator, every evaluation counted; its final E_ref and the first evaluation count
+    from which the best point so far is within 0.1 % of `best` (a grid's best E_ref [m])."""
+    from diffsense.solve import Evaluator
+    from scipy.optimize import minimize_scalar
+
+    ev, trace = Evaluator(E), []
+
+    def f(x):
+        trace.append(ev.e_reference(float(x)))
+        return trace[-1]
+
+    t0 = time.perf_counter()
+    minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": 100})
+    running = np.minimum.accumulate(trace)
+    reached = np.nonzero(running <= best * 1.001)[0]
+    return {"brent_evaluations": len(trace), "brent_E_ref": float(running[-1]),
+            "brent_evaluations_to_0.1pct": int(reached[0]) + 1 if reached.size else None,
+            "brent_wall_s": time.perf_counter() - t0}
+
+
 def solve_against_brent(args) -> list[dict]:
     """The default solve (`diffsense.optimise`, default estimator) against bounded Brent on E_ref
     on each --solve LO:HI: E_ref at each answer with its standard error, against the best point
@@ -202,7 +224,6 @@ def solve_against_brent(args) -> list[dict]:
     import diffsense as ds
     from diffsense.metrics import EstimatorConfig
     from diffsense.solve import Evaluator
-    from scipy.optimize import minimize_scalar
 
     law = _law(args)
     out = []
@@ -220,26 +241,11 @@ def solve_against_brent(args) -> list[dict]:
         ref = result.reference
         r_star = next(iter(result.r_star.values()))
         evals = result.evaluations
-        # Brent on E_ref: a fresh evaluator, every evaluation counted; the first evaluation count
-        # from which the best point so far is within 0.1 % of the grid's best.
-        brent_ev, trace = Evaluator(E), []
-
-        def f(x):
-            trace.append(brent_ev.e_reference(float(x)))
-            return trace[-1]
-
-        t0 = time.perf_counter()
-        minimize_scalar(f, bounds=(lo, hi), method="bounded", options={"xatol": 1e-3 * (hi - lo), "maxiter": 100})
-        brent_s = time.perf_counter() - t0
-        running = np.minimum.accumulate(trace)
-        reached = np.nonzero(running <= best * 1.001)[0]
         row = {"interval": text, "grid_best_r": float(grid[dense.argmin()]), "grid_best_E_ref": best,
                "r_star": r_star, "E_ref_star": ref["E_ref_star"], "E_ref_star_se": ref["E_ref_star_se"],
                "rel_to_grid_best": ref["E_ref_star"] / best - 1.0,
                "solve_sweep_steps": len(result.sweep), "solve_objective": evals["objective"],
-               "solve_gradient": evals["gradient"], "solve_wall_s": solve_s,
-               "brent_evaluations": len(trace), "brent_E_ref": float(running[-1]),
-               "brent_evaluations_to_0.1pct": int(reached[0]) + 1 if reached.size else None, "brent_wall_s": brent_s}
+               "solve_gradient": evals["gradient"], "solve_wall_s": solve_s} | brent_on_reference(E, lo, hi, best)
         print(json.dumps(row), flush=True)
         out.append(row)
     return out

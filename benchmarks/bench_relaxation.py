@@ -3,7 +3,8 @@
     nice -n 10 python benchmarks/bench_relaxation.py [--sensor radar] [--grid LO:HI:STEP ...]
         [--temperatures 0.01,0.003,0.001,0.0001] [--seeds 0] [--solve LO:HI ...]
         [--solve-temperatures 0.01,0.001] [--tau-schedule 4,2,1]
-        [--estimator relaxed-reference|straight-through] [--cost-at HFOV --repeats 15] [--json PATH]
+        [--estimator relaxed-reference|straight-through] [--judge-draws M [--judge-grid]] [--brent]
+        [--cost-at HFOV --repeats 15] [--json PATH]
 
 For each seed (scene variants, measurement noise and the reference's uniforms), on the problem of
 `bench_detection.py` (sc01, 1 variant, the sensor's probabilistic law, K = --draws):
@@ -18,6 +19,12 @@ For each seed (scene variants, measurement noise and the reference's uniforms), 
   --solve-temperatures (its default continuation 4, 2, 1 times lambda; the answer judged on
   E_ref), E_ref(r*) against the best point of the 1-deg grid of E_ref on LO:HI (taken from an
   agreement grid LO:HI:1 when there is one) and the evaluations it used.
+- judge (--judge-draws M): each solve's answer r* and the grid's best r_b on E_ref's own K draws
+  and on M fresh draws of the same scene (indices K ... K+M-1, independent of the draws both were
+  chosen on), with the paired difference E(r*) / E(r_b) - 1 and its standard error (the delta
+  method on the draws' paired differences); with --judge-grid also the whole 1-deg grid on the
+  fresh draws, its best, and r* against it. With --brent, bounded Brent on E_ref over the
+  interval too (`bench_detection.py`'s: evaluations, final E_ref, evaluations to within 0.1 %).
 - cost (--cost-at HFOV, instead of the above): the median time of one E_ref, and of each
   estimator's value and value and gradient, over --repeats interleaved rounds.
 """
@@ -31,7 +38,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_detection import _law, _param, _problem, problem_args
+from bench_detection import _law, _param, _problem, brent_on_reference, problem_args
 
 
 def _ref_grid(ev, r):
@@ -82,6 +89,36 @@ def agreement(args, seed) -> list[dict]:
     return out
 
 
+def _paired(a, b) -> dict:
+    """E(a) / E(b) - 1 from two points' per-draw hard objectives [m^2] on the same draws, with its
+    standard error: the paired differences' mean over 2 E(b)^2 (delta method, near 0)."""
+    a, b = np.asarray(a.draws, np.float64), np.asarray(b.draws, np.float64)
+    d = a - b
+    return {"rel": float(np.sqrt(a.mean() / b.mean()) - 1.0),
+            "rel_se": float(d.std(ddof=1) / np.sqrt(d.size) / (2.0 * b.mean()))}
+
+
+def judge(args, objective, r_star: float, grid: dict) -> dict:
+    """r* and the grid's best r_b on E_ref's own K draws and on --judge-draws fresh ones."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    on = eqx.filter_jit(lambda o, x, ids: o.reference(o.point(x), draws=ids))
+    own, fresh = jnp.arange(args.draws), jnp.arange(args.draws, args.draws + args.judge_draws)
+    r_best = float(grid["r"][int(np.argmin(grid["E_ref"]))])
+    at = {x: (on(objective, jnp.asarray(x), own), on(objective, jnp.asarray(x), fresh)) for x in (r_star, r_best)}
+    row = {"r_best": r_best, "fresh_draws": args.judge_draws,
+           "own": _paired(at[r_star][0], at[r_best][0]), "fresh": _paired(at[r_star][1], at[r_best][1]),
+           "E_fresh_star": float(at[r_star][1].e), "E_fresh_star_se": float(at[r_star][1].e_se),
+           "E_fresh_best": float(at[r_best][1].e), "E_fresh_best_se": float(at[r_best][1].e_se)}
+    if args.judge_grid:
+        refs = [on(objective, jnp.asarray(x), fresh) for x in grid["r"]]
+        i = int(np.argmin([float(v.e) for v in refs]))
+        row |= {"fresh_grid_best_r": float(grid["r"][i]), "fresh_grid_best_E": float(refs[i].e),
+                "fresh_vs_fresh_grid_best": _paired(at[r_star][1], refs[i])}
+    return row
+
+
 def solves(args, seed, grids) -> list[dict]:
     import diffsense as ds
     from diffsense.metrics import EstimatorConfig
@@ -93,9 +130,9 @@ def solves(args, seed, grids) -> list[dict]:
         known = next((g for g in grids if g["grid"] == f"{text}:1"), None)
         if known is None:
             ev = Evaluator(ds.objective(_problem(args, args.law, seed=seed)))
-            best = float(_ref_grid(ev, np.arange(lo, hi + 0.5, 1.0))[0].min())
-        else:
-            best = float(min(known["E_ref"]))
+            r = np.arange(lo, hi + 0.5, 1.0)
+            known = {"r": r.tolist(), "E_ref": _ref_grid(ev, r)[0].tolist()}
+        best = float(min(known["E_ref"]))
         for lam in args.solve_temperatures:
             est = EstimatorConfig(kind=args.estimator, reference_draws=args.draws, reference_temperature=lam)
             problem = _problem(args, args.law, seed=seed, params={_param(args): (lo, hi)}, estimator=est)
@@ -112,6 +149,10 @@ def solves(args, seed, grids) -> list[dict]:
                    "sweep_steps": len(result.sweep), "objective": result.evaluations["objective"],
                    "gradient": result.evaluations["gradient"], "notes": list(result.notes),
                    "wall_s": time.perf_counter() - t0}
+            if args.judge_draws:
+                row["judge"] = judge(args, ds.objective(problem), row["r_star"], known)
+            if args.brent:
+                row["brent"] = brent_on_reference(ds.objective(problem), lo, hi, best)
             print(json.dumps(row), flush=True)
             out.append(row)
     return out
@@ -176,6 +217,10 @@ def main() -> None:
                    help="the solves' continuation, multipliers of lambda, largest first (default: the config's)")
     p.add_argument("--estimator", default="relaxed-reference", choices=("relaxed-reference", "straight-through"),
                    help="the estimator of the grids and solves (straight-through: E_ref forward, relaxed backward)")
+    p.add_argument("--judge-draws", type=int, default=0, metavar="M",
+                   help="judge each solve's answer and the grid's best on M fresh draws (0: not)")
+    p.add_argument("--judge-grid", action="store_true", help="with --judge-draws: the whole 1-deg grid on the fresh draws too")
+    p.add_argument("--brent", action="store_true", help="also run bounded Brent on E_ref over each --solve interval")
     p.add_argument("--cost-at", type=float, metavar="HFOV",
                    help="time E_ref and each estimator's value and value-and-gradient at this HFOV [deg] instead")
     p.add_argument("--repeats", type=int, default=15, help="rounds of --cost-at")

@@ -116,3 +116,14 @@ def test_evaluator_memoises_the_reference_and_the_dense_check_uses_it(swerling):
 def test_reference_draws_must_give_a_standard_error():
     with pytest.raises(InputError, match="reference_draws must be >= 2"):
         EstimatorConfig(reference_draws=1)
+
+
+def test_other_draw_indices_are_independent_draws_of_the_same_scene(swerling):
+    # E_ref's own draws are indices 0 ... K-1; indices from K on are fresh draws of the same scene,
+    # so a block of 2K draws is the mean of the two K-blocks, and the default is the first block.
+    on = eqx.filter_jit(lambda o, r, ids: o.reference({H: r}, draws=ids))
+    own, fresh, both = (on(swerling, 8.0, jnp.arange(a, b)) for a, b in ((0, 4), (4, 8), (0, 8)))
+    np.testing.assert_array_equal(np.asarray(own.draws), np.asarray(reference(swerling, 8.0).draws))
+    np.testing.assert_array_equal(np.asarray(both.draws), np.concatenate([np.asarray(own.draws), np.asarray(fresh.draws)]))
+    assert not np.array_equal(np.asarray(fresh.draws), np.asarray(own.draws))
+    assert float(both.e2) == pytest.approx(0.5 * (float(own.e2) + float(fresh.e2)), rel=1e-12)

@@ -37,7 +37,7 @@ from typing import Any, Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from diffsense.metrics._coverage import coverage_classes, p_tracked, target_window
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
@@ -293,9 +293,13 @@ class Objective(eqx.Module):
                               coverage=coverage, sq_true_gt=sq_true(self.data.gt_pred), sq_true_sensor=sq_true(pred),
                               objective=self._question(pred, coverage[..., 1]), p_detect=det.p_detect)
 
-    def reference(self, r: Params) -> ReferenceEvaluation:
+    def reference(self, r: Params, draws: Int[Array, " K"] | None = None) -> ReferenceEvaluation:
         """E_ref at r with its Monte-Carlo standard error: the mean of the hard objective over
-        `estimator.reference_draws` detection draws with common random numbers (`_reference.py`)."""
+        `estimator.reference_draws` detection draws with common random numbers (`_reference.py`).
+
+        `draws`, the draws' indices, defaults to 0 ... K-1. Indices from K on are draws independent
+        of E_ref's own: they judge a point chosen on E_ref (a solve's answer, a grid's best)
+        without the noise it was chosen on."""
         if is_deterministic(self.sensor):
             return summarise(self.hard(r).objective[None])
         events = detection_events(self, r)
@@ -307,7 +311,8 @@ class Objective(eqx.Module):
             coverage = jax.vmap(coverage_classes)(self._target_window(d))
             return self._question(self._predict(d), coverage[..., 1])
 
-        return summarise(jax.lax.map(one_draw, jnp.arange(self.estimator.reference_draws)))
+        ids = jnp.arange(self.estimator.reference_draws) if draws is None else jnp.asarray(draws)
+        return summarise(jax.lax.map(one_draw, ids))
 
     def point(self, values) -> dict[str, Array]:
         """r as a dict from values in the order of `names` (a scalar for one parameter)."""
