@@ -41,17 +41,17 @@ from jaxtyping import Array, Float, Int
 
 from diffsense.metrics._coverage import coverage_classes, p_tracked, target_window
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
-from diffsense.metrics._estimators import EstimatorConfig, relaxed_bernoulli, relaxed_draw, straight_through
+from diffsense.metrics._estimators import EstimatorConfig, straight_through
 from diffsense.metrics._reference import (
-    MC_STREAM,
     ReferenceEvaluation,
     declares_random_law,
     detection_events,
     is_deterministic,
     summarise,
 )
+from diffsense.metrics._sampling import estimator_samples
 from diffsense.predictors import InputSpec
-from diffsense.sensors import Sensor, Suite, Weather
+from diffsense.sensors import Sensor, Weather
 from diffsense.sensors._datatypes import Detections
 from diffsense.tracks import FillPolicy, build_inputs, flatten_instants
 
@@ -198,7 +198,7 @@ class Objective(eqx.Module):
     def _soft_mean(self, r: Params, tau, reduce: Callable[[Array, Detections], Array]) -> Array:
         """reduce(predictions [N, I, F, 2], detections) with soft detections, averaged over the
         estimator's samples (one pass for mean-field)."""
-        sampled = self._samples(r, tau)
+        sampled = estimator_samples(self, r, tau)
         if sampled is None:  # mean-field (and the drawn estimators under a deterministic law)
             det = self.detections(r, "soft", tau)
             return reduce(self._predict(det), det)
@@ -222,37 +222,6 @@ class Objective(eqx.Module):
 
         # E_ref's value (the hard draws), the relaxed draws' gradient
         return straight_through(jnp.mean(jax.lax.map(one_hard, draws), axis=0), relaxed)
-
-    def _samples(self, r: Params, tau) -> tuple[Array, Callable, Callable | None] | None:
-        """The drawn estimators' samples at r: (what each sample is indexed by, sample ->
-        relaxed Detections, sample -> hard Detections for straight-through or None); None for
-        the one-pass mean-field."""
-        kind, key = self.estimator_kind, self.data.noise_key
-        if kind in ("relaxed-reference", "straight-through") and not is_deterministic(self.sensor):
-            # The reference's own events (exact occlusion geometry; a suite's members one by
-            # one): under a probabilistic law p is already smooth in the sensor's parameters,
-            # and only the draw needs relaxing, so the estimate tends to E_ref itself as the
-            # temperature falls.
-            events = detection_events(self, r)
-            temperature = self.estimator.reference_temperature * jnp.asarray(tau, self.dtype)
-            relax = lambda k: events.combine([relaxed_draw(p, u, temperature)
-                                              for p, u in zip(events.p_detect, events.uniforms(key, k))])
-            hard = lambda k: events.combine([(u < p).astype(self.dtype)
-                                             for p, u in zip(events.p_detect, events.uniforms(key, k))])
-            return jnp.arange(self.estimator.reference_draws), relax, hard if kind == "straight-through" else None
-        if kind != "mc":
-            return None
-        lam = self.estimator.relax_temperature
-        if isinstance(self.sensor, Suite):
-            # Each member drawn on its own, from its own uniforms, as E_ref draws them: a sample's
-            # track is the fusion of the members that drew a detection.
-            events = detection_events(self, r, "soft", tau)
-            relax = lambda k: events.combine([relaxed_draw(p, u, lam)
-                                              for p, u in zip(events.p_detect, events.uniforms(key, k, MC_STREAM))])
-            return jnp.arange(self.estimator.samples), relax, None
-        det = self.detections(r, "soft", tau)
-        relax = lambda u: dataclasses.replace(det, p_detect=relaxed_bernoulli(det.p_detect, u, lam))
-        return jnp.swapaxes(self.data.mc_uniform, 0, 1), relax, None
 
     def sq_error(self, r: Params, tau: float | Array = 1.0) -> Float[Array, "N F"]:
         """The soft E^2 split by scene variant and horizon step [m^2].
