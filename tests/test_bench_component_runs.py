@@ -50,3 +50,20 @@ def test_bench_relaxation_times_each_estimator():
     for program in ("E_ref", "relaxed-reference value", "straight-through value+grad"):
         assert program in rows, text
     assert rows["E_ref"].split("|")[3].strip() == "1.00"
+
+
+@pytest.mark.slow
+def test_bench_relaxation_judges_a_solve_on_fresh_draws(tmp_path):
+    # One tiny solve (2 draws, a 3-deg interval) judged on 2 fresh draws, with Brent beside it:
+    # on E_ref's own draws the judge's paired gap is the solve's reported gap to the grid's best.
+    import json
+
+    out = tmp_path / "judge.json"
+    _run("benchmarks/bench_relaxation.py", "--estimator", "straight-through", "--draws", "2", "--solve", "20:23",
+         "--judge-draws", "2", "--judge-grid", "--brent", "--json", str(out))
+    row = json.loads(out.read_text())["solve"][0]
+    judge = row["judge"]
+    assert judge["fresh_draws"] == 2 and judge["r_best"] in (20.0, 21.0, 22.0, 23.0)
+    assert judge["fresh_grid_best_r"] in (20.0, 21.0, 22.0, 23.0)
+    assert judge["own"]["rel"] == pytest.approx(row["rel_to_grid_best"], abs=1e-12)
+    assert row["brent"]["brent_evaluations"] >= 1
