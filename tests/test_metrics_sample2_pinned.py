@@ -1,10 +1,12 @@
-"""Survivors of a third mutation sample of the metrics package (seed 2, at 508e470; stopped at
-its deadline before every sampled mutant was run, so not reported in docs/mutation.md), each
+"""Survivors of the third mutation sample of the metrics package (seed 2): a first run at 508e470
+stopped at its deadline; the complete run at b13e2fb is in docs/mutation.md. Each survivor is
 pinned to a value computed independently.
 
 - The hard evaluation's RMSE against the true future is per scenario the root of the mean over
   that scenario's variants (of the mean over instants) of the squared error: a scenario of two
   variants is their mean, not their sum or twice it.
+- Soft detections asked without a temperature are at the gates' configured temperatures
+  (multiplier 1), as the objective's value is.
 """
 
 from __future__ import annotations
@@ -36,3 +38,16 @@ def test_rmse_per_scenario_is_the_mean_over_its_variants():
     s = np.asarray(h.sq_true_sensor).mean(axis=1)  # [N, F]
     np.testing.assert_allclose(np.asarray(h.rmse_sensor[0]), np.sqrt((s[0] + s[2]) / 2), rtol=1e-12)
     np.testing.assert_allclose(np.asarray(h.rmse_sensor[1]), np.sqrt(s[1]), rtol=1e-12)
+
+
+def test_soft_detections_default_to_the_configured_temperatures():
+    """`E.detections(r, "soft")` is at temperature multiplier tau = 1, the gates' configured
+    temperatures, as `E(r)` is: the same p as tau = 1 given, another p at tau = 2 (a car on the
+    range gate's soft edge is seen with a different probability when the edge is twice as wide)."""
+    E = toy_objective(n=1, instants=4)
+    r = {"range_m": 30.0}
+    default = np.asarray(E.detections(r, "soft").p_detect)
+    np.testing.assert_array_equal(default, np.asarray(E.detections(r, "soft", 1.0).p_detect))
+    wider = np.asarray(E.detections(r, "soft", 2.0).p_detect)
+    edge = (default > 0.01) & (default < 0.99)
+    assert edge.any() and not np.allclose(default[edge], wider[edge])
