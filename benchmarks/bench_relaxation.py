@@ -91,7 +91,7 @@ def agreement(args, seed) -> list[dict]:
 
 def _paired(a, b) -> dict:
     """E(a) / E(b) - 1 from two points' per-draw hard objectives [m^2] on the same draws, with its
-    standard error: the paired differences' mean over 2 E(b)^2 (delta method, near 0)."""
+    standard error: that of the paired differences' mean, over 2 E(b)^2 (delta method, near 0)."""
     a, b = np.asarray(a.draws, np.float64), np.asarray(b.draws, np.float64)
     d = a - b
     return {"rel": float(np.sqrt(a.mean() / b.mean()) - 1.0),
