@@ -149,10 +149,11 @@ def solves(args, seed, grids) -> list[dict]:
                    "sweep_steps": len(result.sweep), "objective": result.evaluations["objective"],
                    "gradient": result.evaluations["gradient"], "notes": list(result.notes),
                    "wall_s": time.perf_counter() - t0}
+            E = ds.objective(problem) if args.judge_draws or args.brent else None  # built once for both
             if args.judge_draws:
-                row["judge"] = judge(args, ds.objective(problem), row["r_star"], known)
+                row["judge"] = judge(args, E, row["r_star"], known)
             if args.brent:
-                row["brent"] = brent_on_reference(ds.objective(problem), lo, hi, best)
+                row["brent"] = brent_on_reference(E, lo, hi, best)
             print(json.dumps(row), flush=True)
             out.append(row)
     return out
