@@ -12,7 +12,7 @@ import pytest
 import diffsense as ds
 from diffsense.sensors import make_params
 from diffsense.sensors._inspect import boresight_report
-from diffsense.sensors._params import load_config
+from diffsense.sensors._config import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from diffsense.scene import CAR, EGO, TARGET, TRUCK
 from diffsense.sensors._inspect import coverage_field, probe_scene
-from diffsense.sensors._params import load_config
+from diffsense.sensors._config import load_config
 
 
 def test_probe_scene_is_the_ego_at_the_origin_and_one_probe_per_point():

@@ -17,7 +17,8 @@ from diffsense.sensors import Camera, Radar, Weather
 from diffsense.sensors._camera import camera_accuracy_px_per_rad
 from diffsense.sensors._fusion import Suite, fuse_members
 from diffsense.sensors._member import member_view
-from diffsense.sensors._params import CameraConfig, CameraParams, load_config
+from diffsense.sensors._config import CameraConfig, load_config
+from diffsense.sensors._params import CameraParams
 
 
 def test_the_paper_cameras_fixed_accuracy_keeps_the_parameters_float_type():

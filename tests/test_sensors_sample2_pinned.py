@@ -24,7 +24,7 @@ from diffsense.sensors._detect import p_detect
 from diffsense.sensors._geometry import Tracks, polar
 from diffsense.sensors._inspect import boresight_report
 from diffsense.sensors._mount import mount_of
-from diffsense.sensors._params import load_config
+from diffsense.sensors._config import load_config
 from diffsense.sensors._radar import radar_gain_dbi
 
 

@@ -14,7 +14,8 @@ import pytest
 
 from diffsense.errors import InputError
 from diffsense.sensors import make_sensor
-from diffsense.sensors._params import check_params, load_config
+from diffsense.sensors._config import load_config
+from diffsense.sensors._params import check_params
 from diffsense.sensors._suite import Camera, Radar
 from diffsense.sensors._weather import rain_coefficients, rain_two_way_loss_db
 

@@ -17,7 +17,8 @@ from diffsense.scene import CAR
 from diffsense.sensors import Radar, make_sensor
 from diffsense.sensors._fusion import Suite
 from diffsense.sensors._member import Covariance, member_view
-from diffsense.sensors._params import load_config, with_param
+from diffsense.sensors._config import load_config
+from diffsense.sensors._params import with_param
 from tests._toy_pipeline import ToySensor
 
 KEY = jax.random.key(3, impl="rbg")

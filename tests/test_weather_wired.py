@@ -14,7 +14,7 @@ import pytest
 import diffsense as ds
 from diffsense.sensors import Weather, camera_p_detect, make_params, radar_p_detect
 from diffsense.sensors._inspect import probe_scene
-from diffsense.sensors._params import load_config
+from diffsense.sensors._config import load_config
 
 
 def _car_at(range_m: float, mount_x_m: float):

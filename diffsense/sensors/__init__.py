@@ -22,21 +22,16 @@ from diffsense.sensors._detect import detect, detect_batch, p_detect
 from diffsense.sensors._gates import MODES
 from diffsense.sensors._measure import measurement_noise
 from diffsense.sensors._mount import MOUNT_NAMES, Mount
-from diffsense.sensors._params import (
-    SENSORS,
+from diffsense.sensors._config import (
     CameraConfig,
-    CameraParams,
     CameraTemperatures,
-    ParamSpec,
     RadarConfig,
-    RadarParams,
     RadarTemperatures,
-    check_params,
     load_config,
     make_params,
     param_specs,
-    with_param,
 )
+from diffsense.sensors._params import SENSORS, CameraParams, ParamSpec, RadarParams, check_params, with_param
 from diffsense.sensors._sensor import Sensor, make_sensor, register, sensor_names
 from diffsense.sensors._weather import CLEAR, Weather
 from diffsense.sensors._fusion import Suite

@@ -32,7 +32,8 @@ from diffsense.sensors._laws import (
 )
 from diffsense.sensors._mount import mount_of
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
-from diffsense.sensors._params import CameraConfig, CameraParams
+from diffsense.sensors._config import CameraConfig
+from diffsense.sensors._params import CameraParams
 from diffsense.sensors._weather import CLEAR, Weather
 
 

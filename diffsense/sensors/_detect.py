@@ -12,7 +12,8 @@ from diffsense.sensors._camera import camera_detect, camera_p_detect
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._measure import KeyOrNoise, measurement_noise
-from diffsense.sensors._params import CameraConfig, CameraParams, RadarConfig, RadarParams
+from diffsense.sensors._config import CameraConfig, RadarConfig
+from diffsense.sensors._params import CameraParams, RadarParams
 from diffsense.sensors._radar import radar_detect, radar_p_detect
 
 Params = RadarParams | CameraParams

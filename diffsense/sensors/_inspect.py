@@ -17,7 +17,7 @@ from jaxtyping import Array, Float
 from diffsense.scene import CAR, Scene
 from diffsense.sensors._camera import camera_depth_sigma_m, camera_px_per_rad
 from diffsense.sensors._detect import Config, Params, p_detect
-from diffsense.sensors._params import RadarConfig
+from diffsense.sensors._config import RadarConfig
 from diffsense.sensors._radar import radar_gain_dbi, radar_rcs_dbsm, radar_snr_db
 
 

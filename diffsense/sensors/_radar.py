@@ -30,7 +30,8 @@ from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
 from diffsense.sensors._laws import LogProbability, gaussian_beam_loss_db, log_reported_below, swerling1_log_pd
 from diffsense.sensors._mount import mount_of
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
-from diffsense.sensors._params import RadarConfig, RadarParams
+from diffsense.sensors._config import RadarConfig
+from diffsense.sensors._params import RadarParams
 from diffsense.sensors._weather import CLEAR, Weather
 
 _SPEED_OF_LIGHT_MPS = 299_792_458.0

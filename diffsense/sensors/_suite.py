@@ -12,7 +12,8 @@ from diffsense.sensors._camera import camera_detect
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._measure import KeyOrNoise
-from diffsense.sensors._params import CameraConfig, CameraParams, ParamSpec, RadarConfig, RadarParams, load_config, param_specs
+from diffsense.sensors._config import CameraConfig, RadarConfig, load_config, param_specs
+from diffsense.sensors._params import CameraParams, ParamSpec, RadarParams
 from diffsense.sensors._radar import radar_detect
 from diffsense.sensors._sensor import Sensor, params_of, register
 
