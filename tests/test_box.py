@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from diffsense.errors import InputError
-from diffsense.solve._box import BoxConfig, box_solve, halton, pareto_sweep
+from diffsense.solve._box import BoxConfig, box_solve, pareto_sweep
+from diffsense.solve._box_space import halton
 from diffsense.solve._box_fns import BoxFunctions
 
 NAMES = ("a_deg", "b_m", "c_px")
