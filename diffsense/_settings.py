@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from diffsense import config as cfgio
-from diffsense._problem import resolve_name
+from diffsense._param_names import resolve_name
 from diffsense.errors import InputError
 from diffsense.metrics import PAPER_SCENARIOS, EstimatorConfig
 from diffsense.sensors import make_sensor

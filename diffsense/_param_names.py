@@ -1,0 +1,70 @@
+"""A problem's named parameters: full names from short or qualified ones, and checked bounds."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from diffsense.errors import InputError
+from diffsense.sensors import Sensor
+
+
+def _finite(value: Any, what: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be numbers, got {value!r}") from None
+    if not math.isfinite(v):
+        raise InputError(f"{what} must be finite numbers, got {value!r}")
+    return v
+
+
+def resolve_name(sensor: Sensor, name: str) -> str:
+    """A parameter's full name from a full ("hfov_deg"), short ("hfov") or qualified
+    ("radar.hfov_deg") one; InputError naming the known ones otherwise."""
+    specs = [s.name for s in sensor.param_specs()]
+    if name in specs:
+        return name
+    members = getattr(sensor, "members", None)
+    if members is not None:  # a suite: "member.param", the param resolved within the member
+        kind, dot, rest = name.partition(".")
+        if not dot:
+            raise InputError(f"a suite's parameters are qualified by the sensor: give e.g. "
+                             f"{', '.join(n + '.' + name for n in sensor.names)}")
+        if kind not in sensor.names:
+            raise InputError(f"parameter {name} names sensor {kind!r}, not in the suite ({', '.join(sensor.names)})")
+        return f"{kind}.{resolve_name(members[sensor.names.index(kind)], rest)}"
+    if "." in name:
+        kind, name = name.split(".", 1)
+        if kind != sensor.kind:
+            raise InputError(f"parameter {kind}.{name} names sensor {kind!r}, not in this problem ({sensor.kind})")
+    if name in specs:
+        return name
+    short = {s.rsplit("_", 1)[0]: s for s in specs}
+    if name in short:
+        return short[name]
+    known = ", ".join(f"{k} ({v})" for k, v in short.items())
+    raise InputError(f"unknown {sensor.kind} parameter {name!r} (known: {known})")
+
+
+def _resolve_params(sensor: Sensor, params: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
+    if not isinstance(params, Mapping) or not params:
+        raise InputError("params must name at least one parameter with its bounds, e.g. {'hfov_deg': (30, 180)}")
+    out: dict[str, tuple[float, float]] = {}
+    for raw, bounds in params.items():
+        name = resolve_name(sensor, str(raw))
+        if name in out:
+            raise InputError(f"parameter {name} is named twice")
+        try:
+            lo, hi = (_finite(b, f"bounds of {name}") for b in bounds)
+        except (TypeError, ValueError):
+            raise InputError(f"bounds of {name} must be two numbers (lo, hi), got {bounds!r}") from None
+        if not lo < hi:
+            raise InputError(f"bounds of {name} must have lo < hi, got {lo:g} {hi:g}")
+        spec = sensor.spec(name)
+        for value in (lo, hi):
+            if not spec.contains(value):
+                raise InputError(f"bounds {lo:g} {hi:g} are outside the domain of {name}: {spec.describe()}")
+        out[name] = (lo, hi)
+    return out
