@@ -71,7 +71,8 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     """Many parameters (or a cost): the box solve (`diffsense.solve.box_solve`): a coarse hard
     sample, BFGS with temperature continuation from its best points, every answer checked on the
     hard objective J = E_hard + cost_weight * cost."""
-    from diffsense._optimise import _config, _reference_summary, objective
+    from diffsense._line_report import reference_summary
+    from diffsense._optimise import _config, objective
 
     with CompileClock() as clock:
         say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
@@ -90,7 +91,7 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     return Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={n: s.unit for n, s in problem.specs().items()},
         r_star=dict(box.x_star), E_hard_star=ev.e_hard(x), E_soft_star=float(box.E_soft), solve=None, box=box,
-        reference=_reference_summary(ev, problem, x, _on_hard(problem, E)),
+        reference=reference_summary(ev, problem, x, _on_hard(problem, E)),
         programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
         scenarios=tuple(E.scenario_names), config=_config(problem), domain=domain, box_notes=notes, **parts)

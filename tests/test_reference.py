@@ -14,7 +14,7 @@ import pytest
 
 from diffsense import config as cfg
 from diffsense import sensors as sensor
-from diffsense._optimise import _dense_check
+from diffsense._line_report import dense_check
 from diffsense.errors import InputError
 from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.metrics._reference import reference_uniforms
@@ -105,7 +105,7 @@ def test_evaluator_memoises_the_reference_and_the_dense_check_uses_it(swerling):
     first = ev.reference(12.0)
     assert ev.reference(12.0) is first and ev.reference_count == 1
     result = SimpleNamespace(r_star=12.0, bracket=(8.0, 16.0))
-    dense = _dense_check(ev, result, 8.0, 16.0, 4.0)
+    dense = dense_check(ev, result, 8.0, 16.0, 4.0)
     assert dense["evaluations"] == 3 and dense["objective"] == "reference" and dense["reference_draws"] == 4
     best = min((8.0, 12.0, 16.0), key=ev.e_reference)
     assert dense["r_best"] == best and dense["E_ref_best"] == ev.e_reference(best)
