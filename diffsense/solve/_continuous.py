@@ -80,12 +80,7 @@ def solve(
         grid = check_steps(default_steps(lo, hi) if steps is None else steps, lo, hi)
         soft = ((lambda r, tau: value_and_grad(float(r), float(tau))[0]) if value_and_grad is not None
                 else (lambda r, tau: e2_soft(jnp.asarray(r, dtype), jnp.asarray(tau, dtype))))
-        sweep_points = sweep(
-            lambda r: e_hard(jnp.asarray(r, dtype)),
-            soft,
-            grid,
-            tau=taus[-1],
-        )
+        sweep_points = sweep(lambda r: e_hard(jnp.asarray(r, dtype)), soft, grid, tau=taus[-1])
     sweep_points = tuple(sweep_points)
     t1 = time.perf_counter()
 
@@ -95,9 +90,41 @@ def solve(
     counted = Counted(e2_soft, e_hard, dtype, value_and_grad)
     xtol = config.xtol_rel * (hi - lo)
     notes: list[str] = []
+    levels = _continuation(counted, best.r, (lower, upper), taus, config, xtol, notes)
+    r_star, e_hard_star = _on_hard(counted, levels, best, (lo, hi), config, answer_name, notes)
+    spent = counted.objective + counted.gradient
+    # One evaluation stays back for E_soft at a polished r*.
+    probes = min(config.hard_polish, config.max_evaluations - spent - 1)
+    if probes > 0:
+        r_polished, e_polished = hard_polish_walk(counted, r_star, e_hard_star, lower, upper, probes, xtol)
+        if r_polished != r_star:
+            notes.append(
+                f"hard polish: r={r_star:.6g} -> {r_polished:.6g} lowered {answer_name} from "
+                f"{e_hard_star:.6g} to {e_polished:.6g} m (the soft objective cannot resolve "
+                f"differences this fine)"
+            )
+            r_star, e_hard_star = r_polished, e_polished
+    step_hit = next((p for p in sweep_points if p.r == r_star), None)
+    e_soft_star = step_hit.E_soft if step_hit else e_from_e2(counted.e2(r_star, taus[-1]))
+    total = counted.objective + counted.gradient
+    if total > config.max_evaluations:
+        notes.append(f"{total} evaluations exceed the budget of {config.max_evaluations}")
+    return SolveResult(
+        r_star=float(r_star), E_soft_star=float(e_soft_star), E_hard_star=float(e_hard_star),
+        sweep=sweep_points, evaluations={"objective": counted.objective, "gradient": counted.gradient},
+        on_bound=r_star in (lo, hi), bracket=(float(lower), float(upper)), tau_schedule=taus,
+        levels=tuple(levels), notes=tuple(notes), interval=(lo, hi),
+        wall_s={"sweep": t1 - t0, "solve": time.perf_counter() - t1},
+    )
 
+
+def _continuation(counted: Counted, r0: float, bracket: tuple[float, float], taus: tuple[float, ...],
+                  config: SolveConfig, xtol: float, notes: list[str]) -> list[LevelResult]:
+    """The soft minimum at each temperature, largest first, each level started from the one
+    before and given its share of the evaluation budget; `notes` gains what stopped a level."""
+    lower, upper = bracket
     levels: list[LevelResult] = []
-    y, probe = best.r, 0.25 * (upper - lower)
+    y, probe = r0, 0.25 * (upper - lower)
     for i, tau in enumerate(taus):
         tol = min(xtol * tau / taus[-1], 0.125 * (upper - lower))
         used = counted.objective + counted.gradient
@@ -119,10 +146,16 @@ def solve(
         levels.append(
             LevelResult(tau=tau, r=r, gradient_evaluations=n, bound=bound, converged=done)
         )
+    return levels
 
+
+def _on_hard(counted: Counted, levels: list[LevelResult], best: SweepPoint, interval: tuple[float, float],
+             config: SolveConfig, answer_name: str, notes: list[str]) -> tuple[float, float]:
+    """(r, E_hard): the last level's soft minimum, or, where the hard objective is worse there
+    than at the best step, the best on it of the levels' answers and that step."""
     r_soft = levels[-1].r if levels else best.r
     last = levels[-1] if levels else None
-    if last is not None and last.bound != 0 and r_soft not in (lo, hi):
+    if last is not None and last.bound != 0 and r_soft not in interval:
         notes.append(
             f"the soft minimum at tau={last.tau:g} presses on the bracket edge r={r_soft:.6g}: "
             f"beyond it the sweep's {answer_name} is worse than at the best step r={best.r:.6g}"
@@ -141,35 +174,5 @@ def solve(
             f"best step r={best.r:.6g} ({best.E_hard:.6g} m): the soft objective and {answer_name} disagree "
             f"there; answer r={r_star:.6g} is the best of {len(candidates)} candidates on {answer_name}"
         )
-    spent = counted.objective + counted.gradient
-    # One evaluation stays back for E_soft at a polished r*.
-    probes = min(config.hard_polish, config.max_evaluations - spent - 1)
-    if probes > 0:
-        r_polished, e_polished = hard_polish_walk(counted, r_star, e_hard_star, lower, upper, probes, xtol)
-        if r_polished != r_star:
-            notes.append(
-                f"hard polish: r={r_star:.6g} -> {r_polished:.6g} lowered {answer_name} from "
-                f"{e_hard_star:.6g} to {e_polished:.6g} m (the soft objective cannot resolve "
-                f"differences this fine)"
-            )
-            r_star, e_hard_star = r_polished, e_polished
-    step_hit = next((p for p in sweep_points if p.r == r_star), None)
-    e_soft_star = step_hit.E_soft if step_hit else e_from_e2(counted.e2(r_star, taus[-1]))
-    total = counted.objective + counted.gradient
-    if total > config.max_evaluations:
-        notes.append(f"{total} evaluations exceed the budget of {config.max_evaluations}")
-    return SolveResult(
-        r_star=float(r_star),
-        E_soft_star=float(e_soft_star),
-        E_hard_star=float(e_hard_star),
-        sweep=sweep_points,
-        evaluations={"objective": counted.objective, "gradient": counted.gradient},
-        on_bound=r_star in (lo, hi),
-        bracket=(float(lower), float(upper)),
-        tau_schedule=taus,
-        levels=tuple(levels),
-        notes=tuple(notes),
-        interval=(lo, hi),
-        wall_s={"sweep": t1 - t0, "solve": time.perf_counter() - t1},
-    )
+    return r_star, e_hard_star
 
