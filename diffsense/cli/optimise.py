@@ -212,17 +212,23 @@ def main(argv: list[str] | None = None) -> int:
             table = report.comparison_table(results, unit=first["units"][first["param"]])
             write_bytes(staging / "comparison.txt", (table + "\n").encode())
     progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if len(results) > 1 else ""))
-    if out != Path(args.out):  # a distributed run's worker: process 0 prints and writes
-        return 0
+    if out == Path(args.out):  # else a distributed run's worker: process 0 prints and writes
+        _print_tables(results, table if len(results) > 1 else None)
+    return 0
+
+
+def _print_tables(results: dict, comparison: str | None) -> None:
+    """Each sensor's summary (or box) table and breakdown, then the radar-camera comparison."""
+    from diffsense import report
+
     for content in results.values():
         if content["param"] is None:
             print("\n" + report.box_table(content))
         else:
             print("\n" + report.summary_table(content, unit=content["units"][content["param"]]))
         print(report.breakdown_table(content))
-    if len(results) > 1:
-        print("\nradar versus camera\n" + table)
-    return 0
+    if comparison is not None:
+        print("\nradar versus camera\n" + comparison)
 
 
 def console() -> None:
