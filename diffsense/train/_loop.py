@@ -181,19 +181,8 @@ def train(
     epochs = cfg.optim.mse_epochs + cfg.optim.nll_epochs
     total = epochs * steps_per_epoch
 
-    graphdef, params = nnx.split(new_model(cfg.maneuvers, cfg.optim.seed))
-    opt_state = _optimiser(cfg.optim, total).init(params)
-    leaves, treedef = jax.tree.flatten((params, opt_state))
     ckpt = Path(cfg.run.checkpoint_dir) / CHECKPOINT_NAME
-    start, history, wall_before = 0, [], 0.0
-    # The epoch's training loss is summed on the device (no sync per step) and checkpointed, so
-    # a run resumed mid-epoch reports the same epoch loss as an uninterrupted one.
-    loss_sum = jnp.zeros((), jnp.float32)
-    if resume:
-        start, leaves, history, wall_before, saved_sum = _load_checkpoint(ckpt, cfg, leaves)
-        loss_sum = jnp.asarray(saved_sum, jnp.float32)
-        params, opt_state = jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves])
-        log(f"resumed from {ckpt} at step {start}/{total}")
+    graphdef, params, opt_state, start, history, wall_before, loss_sum = _initial_state(cfg, total, ckpt, resume, log)
 
     scale = position_scale(cfg.optim)
     step_fn = _make_step(graphdef, cfg.optim, total, cfg.maneuvers)
@@ -216,11 +205,9 @@ def train(
             bar.set_postfix(epoch=epoch + 1, phase="nll" if use_nll else "mse", loss=f"{float(loss):.3f}")
         if (g + 1) % steps_per_epoch == 0:
             fut = _validate(predict, fold_position_scale(params, scale), val_set, cfg.run.val_batch_size)
-            rmse = rmse_per_second(fut, val_set.fut_m)
-            train_loss = float(loss_sum) / steps_per_epoch
-            history.append({"epoch": epoch + 1, "phase": "nll" if use_nll else "mse",
-                            "train_loss": train_loss, "val_rmse_m": [round(float(r), 4) for r in rmse]})
-            bar.write(f"epoch {epoch + 1}/{epochs} ({history[-1]['phase']}): train loss {train_loss:.4f}, "
+            record, rmse = _epoch_record(epoch, use_nll, float(loss_sum) / steps_per_epoch, fut, val_set)
+            history.append(record)
+            bar.write(f"epoch {epoch + 1}/{epochs} ({record['phase']}): train loss {record['train_loss']:.4f}, "
                       f"val RMSE 1..5 s [m] {' '.join(f'{r:.2f}' for r in rmse)}")
         done = g + 1
         if done % cfg.run.checkpoint_every_steps == 0 or done == total:
@@ -239,6 +226,30 @@ def train(
 
     save_weights(cfg.run.weights, nnx.merge(graphdef, params), card)
     return card
+
+
+def _initial_state(cfg: TrainConfig, total: int, ckpt: Path, resume: bool, log: Callable[[str], None]):
+    """(graphdef, params, opt_state, first step, history, wall time before [s], epoch loss sum):
+    a new model, or the checkpoint's state when resuming."""
+    graphdef, params = nnx.split(new_model(cfg.maneuvers, cfg.optim.seed))
+    opt_state = _optimiser(cfg.optim, total).init(params)
+    leaves, treedef = jax.tree.flatten((params, opt_state))
+    # The epoch's training loss is summed on the device (no sync per step) and checkpointed, so
+    # a run resumed mid-epoch reports the same epoch loss as an uninterrupted one.
+    if not resume:
+        return graphdef, params, opt_state, 0, [], 0.0, jnp.zeros((), jnp.float32)
+    start, leaves, history, wall_before, saved_sum = _load_checkpoint(ckpt, cfg, leaves)
+    params, opt_state = jax.tree.unflatten(treedef, [jnp.asarray(x) for x in leaves])
+    log(f"resumed from {ckpt} at step {start}/{total}")
+    return graphdef, params, opt_state, start, history, wall_before, jnp.asarray(saved_sum, jnp.float32)
+
+
+def _epoch_record(epoch: int, use_nll: bool, train_loss: float, fut, val_set) -> tuple[dict, np.ndarray]:
+    """The history entry of a finished epoch (its phase, mean training loss and validation RMSE
+    per second of horizon, rounded to 0.1 mm) and that RMSE unrounded [m]."""
+    rmse = rmse_per_second(fut, val_set.fut_m)
+    return {"epoch": epoch + 1, "phase": "nll" if use_nll else "mse", "train_loss": train_loss,
+            "val_rmse_m": [round(float(r), 4) for r in rmse]}, rmse
 
 
 def _model_card(cfg: TrainConfig, params, fut, train_set, val_set, meta: dict, total: int, epochs: int,
