@@ -63,6 +63,16 @@ def test_soft_hold_by_hand():
     np.testing.assert_allclose(got[:, 0], [1.0, 1.5, 2.25])
 
 
+def test_soft_interp_weights_below_one_by_hand():
+    # The soft interp's recurrences (diffsense/tracks/_fill.py) on z = 2, 6 m with p = 1/2, 1/2.
+    # Forward holds F, any-detection h, steps-since a: F0 = 1, h0 = 1/2, a0 = 1/2; backward
+    # (from the right) B0 = 1/2 * 2 + 1/2 * (1/2 * 6) = 5/2, h'0 = 3/4, b0 = 3/4. At k = 0 the
+    # weights b0 h0 + a0 h'0 = 3/8 + 3/8 = 3/4 (below 1, as no hard pattern gives), the fill
+    # (b0 F0 + a0 B0) / (3/4) = (3/4 + 5/4) / (3/4) = 8/3, and the point 1/2 * 2 + 1/2 * 8/3 = 7/3 m.
+    got = np.asarray(fill_window(np.array([[2.0, 0.0], [6.0, 0.0]]), np.array([0.5, 0.5]), "interp"))
+    np.testing.assert_allclose(got[0], [7.0 / 3.0, 0.0], rtol=1e-12)
+
+
 @pytest.mark.xfail(strict=True, reason=(
     "soft interp blends the uncertain point's own measurement into its fill (the forward and "
     "backward holds at k include p_k z_k): 4.25 instead of 0.5 * 4 + 0.5 * 5 = 4.5"))
