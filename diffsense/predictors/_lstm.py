@@ -142,29 +142,6 @@ def _fwd(steps, last_only, x, emb, w_ih, w_hh, b):
     return h_last if last_only else hs, (x, emb, h_prev, c_prev, ts, c_last, w_ih, w_hh, b)
 
 
-def _fwd_unrolled(steps, last_only, x, emb, w_ih, w_hh, b):
-    gates, remat = _Gates(x, emb, w_ih, w_hh, b), _remat(steps, x, w_hh.shape[0])
-    h = c = jnp.zeros((x.shape[-2], gates.hidden), x.dtype)
-    hs, h_prev, c_prev, ts = [], [], [], []
-    for k in range(steps):
-        if gates.repeated:
-            t = jnp.tanh(gates.xw) if k == 0 else gates(None, h)
-        else:
-            t = gates(x[k], h if k else None)
-        h_prev.append(h)
-        c_prev.append(c)
-        ts.append(t)
-        h, c = _cell(t, c, gates.hidden)
-        hs.append(h)
-    out = h if last_only else jnp.stack(hs)
-    return out, (x, emb, jnp.stack(h_prev), jnp.stack(c_prev), None if remat else jnp.stack(ts), c, w_ih, w_hh, b)
-
-
-import os as _os
-if _os.environ.get("LSTM_FWD_UNROLL"):
-    _fwd = _fwd_unrolled
-
-
 def _bwd(steps, last_only, res, dhs):
     x, emb, h_prev, c_prev, ts, c_last, w_ih, w_hh, b = res
     gates = _Gates(x, emb, w_ih, w_hh, b)
