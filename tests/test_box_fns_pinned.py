@@ -10,7 +10,9 @@ import math
 import numpy as np
 import pytest
 
+from diffsense.solve import Evaluator
 from diffsense.solve._box_fns import BoxFunctions, Event
+from tests.test_evaluator_pinned import Bowl
 
 
 def _fns(cost=None):
@@ -48,3 +50,11 @@ def test_the_gradient_of_e_below_one_metre():
     j, grad, e = _fns().j_soft([1.0], 1.0, 0.0)
     assert e == pytest.approx(math.sqrt(0.26), rel=1e-15) and j == e
     np.testing.assert_allclose(grad, [0.5 / (2.0 * math.sqrt(0.26))], rtol=1e-15)
+
+
+def test_from_an_evaluator_without_a_cost():
+    # The bowl: E_soft^2(4, 1) = (4 - 3)^2 + 1/4 = 1.25 m^2 with gradient 2; E_hard(3) = 0.5 m.
+    fns = BoxFunctions.from_evaluator(Evaluator(Bowl()))
+    v, g = fns.e2_soft([4.0], 1.0)
+    assert v == 1.25 and g.tolist() == [2.0]
+    assert fns.j_hard([3.0], 5.0) == (0.5, 0.5, 0.0)
