@@ -67,3 +67,18 @@ def test_bracketed_secant_first_probe_is_a_quarter_of_the_bracket():
 def test_bracketed_secant_stops_after_max_evaluations():
     asked, _ = _secant_points(max_evaluations=2)
     assert asked == [0.5, 2.5]
+
+
+def test_bracketed_secant_first_probe_is_a_quarter_of_the_bracket_width():
+    # The case above moved by +2 (g = y - 8 on [2, 10] from 2.5): the same steps, moved.
+    jax.config.update("jax_enable_x64", True)
+    asked = []
+
+    def g(y, args):
+        jax.debug.callback(lambda v: asked.append(float(v)), y, ordered=True)
+        return y - 8.0
+
+    sol = optx.root_find(g, BracketedSecant(rtol=0.0, atol=1e-6), jnp.asarray(2.5),
+                         options=dict(lower=2.0, upper=10.0), max_steps=20, throw=False)
+    jax.effects_barrier()
+    assert (asked, float(sol.value)) == ([2.5, 4.5, 9.75, 8.0], 8.0)
