@@ -45,17 +45,18 @@ def test_box_solve_turns_float64_on():
         jax.config.update("jax_enable_x64", True)
 
 
-def _secant_points(**options):
-    """The points g(y) = y - 6 is asked at by the secant on [0, 8] from 0.5, and the answer."""
+def _secant_points(shift=0.0, **options):
+    """The points g(y) = y - 6 is asked at by the secant on [0, 8] from 0.5, and the answer; all
+    of it moved by `shift`."""
     jax.config.update("jax_enable_x64", True)
     asked = []
 
     def g(y, args):
         jax.debug.callback(lambda v: asked.append(float(v)), y, ordered=True)
-        return y - 6.0
+        return y - (6.0 + shift)
 
-    sol = optx.root_find(g, BracketedSecant(rtol=0.0, atol=1e-6), jnp.asarray(0.5),
-                         options=dict(lower=0.0, upper=8.0, **options), max_steps=20, throw=False)
+    sol = optx.root_find(g, BracketedSecant(rtol=0.0, atol=1e-6), jnp.asarray(0.5 + shift),
+                         options=dict(lower=shift, upper=8.0 + shift, **options), max_steps=20, throw=False)
     jax.effects_barrier()
     return asked, float(sol.value)
 
@@ -69,16 +70,7 @@ def test_bracketed_secant_stops_after_max_evaluations():
     assert asked == [0.5, 2.5]
 
 
+
 def test_bracketed_secant_first_probe_is_a_quarter_of_the_bracket_width():
     # The case above moved by +2 (g = y - 8 on [2, 10] from 2.5): the same steps, moved.
-    jax.config.update("jax_enable_x64", True)
-    asked = []
-
-    def g(y, args):
-        jax.debug.callback(lambda v: asked.append(float(v)), y, ordered=True)
-        return y - 8.0
-
-    sol = optx.root_find(g, BracketedSecant(rtol=0.0, atol=1e-6), jnp.asarray(2.5),
-                         options=dict(lower=2.0, upper=10.0), max_steps=20, throw=False)
-    jax.effects_barrier()
-    assert (asked, float(sol.value)) == ([2.5, 4.5, 9.75, 8.0], 8.0)
+    assert _secant_points(shift=2.0) == ([2.5, 4.5, 9.75, 8.0], 8.0)
