@@ -120,6 +120,8 @@ CASES = {
     "start_above_upper": (lambda y: y - 9.0, 6.5, 0.0, 5.0, 1e-9, None),
     "zero_at_lower": (lambda y: y, 0.0, 0.0, 5.0, 1e-9, None),
     "zero_at_upper": (lambda y: y - 5.0, 5.0, 0.0, 5.0, 1e-9, None),
+    # Bracket [0, 1] after two evaluations, exactly 2 * xtol wide: stop at its midpoint.
+    "exactly_two_tol_wide": (lambda y: y - 0.3, 0.0, 0.0, 1.0, 0.5, None),
     "resolution_floor": (_kinked, 1e8 + 0.0625, 1e8 - 1.0, 1e8 + 1.0, 1e-12, None),
 }
 
