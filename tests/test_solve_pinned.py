@@ -298,3 +298,13 @@ def test_an_empty_interval_is_refused():
     for lo, hi in ((3.0, 3.0), (4.0, 3.0)):
         with pytest.raises(InputError, match="LO must be smaller than HI"):
             check_interval(lo, hi)
+
+
+def test_the_least_budget_still_runs_the_first_level():
+    # One level and max_evaluations 3, the least SolveConfig accepts: the level's share is
+    # 3 - 2 (the answer's hard and soft evaluations) = 1 gradient evaluation, which it spends.
+    result = solve(*bowl(0.3), (0.0, 1.0), steps=[0.0, 0.5, 1.0],
+                   config=SolveConfig(tau_schedule=(1.0,), hard_polish=0, max_evaluations=3))
+    assert [level.gradient_evaluations for level in result.levels] == [1]
+    assert result.evaluations["gradient"] == 1
+    assert not any("budget spent" in note for note in result.notes)
