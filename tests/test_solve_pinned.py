@@ -308,3 +308,21 @@ def test_the_least_budget_still_runs_the_first_level():
     assert [level.gradient_evaluations for level in result.levels] == [1]
     assert result.evaluations["gradient"] == 1
     assert not any("budget spent" in note for note in result.notes)
+
+
+def _two_centres(r, tau):
+    """E^2 = 1 + (r - c)^2 with c = 0.3 at tau 2 and 0.375 (a binary fraction) at tau 1."""
+    return 1.0 + (r - jnp.where(tau > 1.5, 0.3, 0.375)) ** 2
+
+
+def test_bisection_stops_on_an_exact_zero_of_the_gradient():
+    # The second level's halving of (0, 1)-grid brackets lands on 0.375, where dE^2/dr is 0
+    # exactly: it stops there, inside the bracket and converged, and the levels' counts add
+    # up to the solve's.
+    _, e_hard = bowl(0.375)
+    config = dataclasses.replace(WALK, tau_schedule=(2.0, 1.0), max_evaluations=30)
+    result = solve(_two_centres, e_hard, (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=config)
+    last = result.levels[-1]
+    assert (last.r, last.bound, last.converged) == (0.375, 0, True)
+    assert result.r_star == 0.375
+    assert sum(level.gradient_evaluations for level in result.levels) == result.evaluations["gradient"]
