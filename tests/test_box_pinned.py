@@ -18,6 +18,7 @@ import pytest
 
 from diffsense.solve._box import BoxConfig, box_solve
 from diffsense.solve._box_fns import BoxFunctions
+from diffsense.solve._box_space import halton
 from diffsense.solve._bracketed import BracketedSecant
 
 
@@ -74,3 +75,11 @@ def test_bracketed_secant_stops_after_max_evaluations():
 def test_bracketed_secant_first_probe_is_a_quarter_of_the_bracket_width():
     # The case above moved by +2 (g = y - 8 on [2, 10] from 2.5): the same steps, moved.
     assert _secant_points(shift=2.0) == ([2.5, 4.5, 9.75, 8.0], 8.0)
+
+
+def test_halton_is_the_radical_inverse_rotated_by_the_seeds_draw():
+    # The first four radical inverses in bases 2 and 3, written out, then the Cranley-Patterson
+    # shift drawn from seed 0 (the default) added modulo 1.
+    radical = np.array([[1 / 2, 1 / 3], [1 / 4, 2 / 3], [3 / 4, 1 / 9], [1 / 8, 4 / 9]])
+    shift = np.random.default_rng(0).uniform(size=2)
+    np.testing.assert_allclose(halton(4, 2), (radical + shift) % 1.0, rtol=0, atol=1e-15)
