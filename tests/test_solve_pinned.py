@@ -316,9 +316,9 @@ def _two_centres(r, tau):
 
 
 def test_bisection_stops_on_an_exact_zero_of_the_gradient():
-    # The second level's halving of (0, 1)-grid brackets lands on 0.375, where dE^2/dr is 0
-    # exactly: it stops there, inside the bracket and converged, and the levels' counts add
-    # up to the solve's.
+    # The second level starts at the first's answer near 0.3 and halves its bracket onto 0.375,
+    # where dE^2/dr is exactly 0: it stops there, inside the bracket and converged, and the
+    # levels' gradient counts add up to the solve's (the second level's count excludes the first's).
     _, e_hard = bowl(0.375)
     config = dataclasses.replace(WALK, tau_schedule=(2.0, 1.0), max_evaluations=30)
     result = solve(_two_centres, e_hard, (0.0, 1.0), steps=[0.0, 0.5, 1.0], config=config)
