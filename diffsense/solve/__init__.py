@@ -14,7 +14,8 @@ sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, 
 """
 
 from diffsense.solve._bracketed import BracketedSecant
-from diffsense.solve._box import BoxConfig, BoxResult, box_solve, pareto_sweep
+from diffsense.solve._box import BoxConfig, BoxResult, box_solve
+from diffsense.solve._pareto import pareto_sweep
 from diffsense.solve._box_fns import BoxFunctions
 from diffsense.solve._evaluator import Evaluator
 from diffsense.solve._continuous import LevelResult, SolveConfig, SolveResult, solve

@@ -15,14 +15,14 @@ x = lo + (hi - lo) (1 + sin t) / 2 with t unconstrained, so every point a solver
 in [lo, hi] (clipped against rounding), and a minimum on a bound is an ordinary stationary
 point in t (J changes quadratically in t there), which BFGS reaches instead of running off to
 infinity. A parameter within `bound_tol` of a bound (relative to its box) is put on it and
-flagged. BFGS starts from the identity inverse Hessian, so J is scaled per run (`_Runner.run`).
+flagged. BFGS starts from the identity inverse Hessian, so J is scaled per run (`_first_scale`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import equinox as eqx
@@ -136,14 +136,8 @@ class _Runner:
         d = len(fns.names)
         vec, scalar = jax.ShapeDtypeStruct((d,), jnp.float64), jax.ShapeDtypeStruct((), jnp.float64)
 
-        def host(t, tau, scale):
-            t = np.asarray(t, np.float64)
-            j, g, _ = fns.j_soft(box.x(t), float(tau), weight)
-            dxdt = box.width * 0.5 * np.cos(t)
-            return np.float64(j * scale), np.asarray(g * dxdt * scale, np.float64)
-
         def call(t, tau, scale):
-            return jax.pure_callback(host, (scalar, vec), t, tau, scale)
+            return jax.pure_callback(self.j_t, (scalar, vec), t, tau, scale)
 
         @jax.custom_jvp
         def j(t, tau, scale):
@@ -163,21 +157,26 @@ class _Runner:
         self._step = eqx.filter_jit(lambda solver, t, args, state: solver.step(fn, t, args, {}, state, tags)[:2])
         self.fns, self.box, self.weight, self.config = fns, box, weight, config
 
-    def run(self, t0: np.ndarray, tau: float, budget: int) -> tuple[np.ndarray, int]:
-        """BFGS from t0 at temperature tau: (t at the end, steps taken).
+    def j_t(self, t, tau, scale) -> tuple[np.float64, np.ndarray]:
+        """scale * J at x(t) and its gradient in t (the chain rule through the sine transform)."""
+        t = np.asarray(t, np.float64)
+        j, g, _ = self.fns.j_soft(self.box.x(t), float(tau), self.weight)
+        dxdt = self.box.width * 0.5 * np.cos(t)
+        return np.float64(j * scale), np.asarray(g * dxdt * scale, np.float64)
 
-        J is divided by |J(t0)| (a relative objective: steps do not depend on its units), and
-        further if that would make the first step move any t by more than `first_step_rad`.
-        Tolerances are scaled by tau / tau_last, as the continuation only needs the last level exact.
-        """
-        j, g, _ = self.fns.j_soft(self.box.x(t0), tau, self.weight)
-        g_max = float(np.max(np.abs(g * self.box.width * 0.5 * np.cos(t0))))
-        scale = 1.0 / max(abs(j), 1e-12)
-        if g_max * scale > self.config.first_step_rad:
-            scale = self.config.first_step_rad / g_max
+    def tolerances(self, tau: float) -> tuple[float, float, float]:
+        """(rtol, atol, ftol) at temperature tau: the config's, scaled by tau / tau_last, as the
+        continuation only needs the last level exact."""
         loose = tau / float(self.config.tau_schedule[-1])
-        rtol, atol = jnp.asarray(self.config.rtol * loose), jnp.asarray(self.config.atol * loose)
-        solver = optx.BFGS(rtol, atol)
+        return self.config.rtol * loose, self.config.atol * loose, self.config.ftol * loose
+
+    def run(self, t0: np.ndarray, tau: float, budget: int) -> tuple[np.ndarray, int]:
+        """BFGS from t0 at temperature tau until the soft count reaches `budget`: (t at the end,
+        steps taken). J is scaled by `_first_scale`."""
+        j, g_t = self.j_t(t0, tau, 1.0)
+        scale = _first_scale(float(j), float(np.max(np.abs(g_t))), self.config.first_step_rad)
+        rtol, atol, ftol = self.tolerances(tau)
+        solver = optx.BFGS(jnp.asarray(rtol), jnp.asarray(atol))
         args = (jnp.asarray(tau, jnp.float64), jnp.asarray(scale, jnp.float64))
         t = jnp.asarray(t0, jnp.float64)
         state = self._init(solver, t, args)
@@ -193,10 +192,29 @@ class _Runner:
             f = float(state.f_info.f)
             if not accepted or f != accepted[-1]:
                 accepted.append(f)
-            stalled = len(accepted) >= 4 and accepted[-4] - accepted[-1] <= self.config.ftol * loose * abs(accepted[-1])
-            if bool(state.terminate) or stalled or move <= float(atol) + float(rtol) * float(jnp.max(jnp.abs(t))):
+            if (bool(state.terminate) or _stalled(accepted, ftol)
+                    or _small_move(move, float(jnp.max(jnp.abs(t))), rtol, atol)):
                 break
         return np.asarray(t, np.float64), steps
+
+
+def _first_scale(j: float, g_max: float, first_step_rad: float) -> float:
+    """The factor J is multiplied by in a BFGS run: 1 / |J(t0)| (a relative objective: steps do not
+    depend on its units), smaller if the first step (the gradient in t, as BFGS starts from the
+    identity inverse Hessian) would then move any t by more than `first_step_rad` [rad]; g_max is
+    the largest |dJ/dt| at t0."""
+    scale = 1.0 / max(abs(j), 1e-12)
+    return first_step_rad / g_max if g_max * scale > first_step_rad else scale
+
+
+def _stalled(accepted: Sequence[float], ftol: float) -> bool:
+    """J has fallen by no more than ftol * |J| over its last 3 accepted steps (4 values)."""
+    return len(accepted) >= 4 and accepted[-4] - accepted[-1] <= ftol * abs(accepted[-1])
+
+
+def _small_move(move: float, t_max: float, rtol: float, atol: float) -> bool:
+    """The next trial point moves t by at most atol + rtol * max|t| [rad]."""
+    return move <= atol + rtol * t_max
 
 
 def _check_bounds(names: Sequence[str], bounds: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -221,7 +239,7 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
     d, lam, first, counts0 = len(names), config.cost_weight, len(fns.history), dict(fns.counts)
     budget = counts0["soft"] + config.max_soft
     box = _Box(lo, hi, config.bound_tol)
-    points = [box.x(box.t(np.clip(np.asarray(p, np.float64), lo, hi))) for p in extra_starts]
+    points = [box.x(box.t(p)) for p in extra_starts]  # a start outside the box: on its bound
     points += list(lo + (hi - lo) * halton(config.samples or 2 * d + 2, d, config.seed))
     sample = sorted(((fns.j_hard(p, lam)[0], i) for i, p in enumerate(points)))
     runner = _Runner(fns, box, lam, config) if config.starts else None
@@ -254,23 +272,3 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
 
 def _named(names: Sequence[str], x) -> dict[str, float]:
     return {n: float(v) for n, v in zip(names, np.asarray(x, np.float64))}
-
-
-def pareto_sweep(fns: BoxFunctions, bounds: Any, weights: Sequence[float], config: BoxConfig = BoxConfig(),
-                 extra_starts: Sequence[Sequence[float]] = (),
-                 on_solved: Callable[[int, float, BoxResult], None] | None = None,
-                 ) -> tuple[tuple[BoxResult, ...], tuple[bool, ...]]:
-    """One box solve per cost weight, in the order given, and which answers are Pareto-optimal in
-    (E_hard, cost). Each solve after the first is warm-started: the previous weight's answer joins
-    its sample (and `extra_starts`); the evaluations are memoised in `fns`, so the coarse sample is
-    paid for once. `on_solved(k, weight, result)` is called after each solve."""
-    results: list[BoxResult] = []
-    for k, w in enumerate(weights):
-        warm = [[results[-1].x_star[n] for n in fns.names]] if results else []
-        results.append(box_solve(fns, bounds, dataclasses.replace(config, cost_weight=float(w)),
-                                 extra_starts=[*warm, *extra_starts]))
-        if on_solved is not None:
-            on_solved(k, float(w), results[-1])
-    pts = [(r.E_hard, r.cost) for r in results]
-    front = tuple(not any(q[0] <= p[0] and q[1] <= p[1] and q != p for q in pts) for p in pts)
-    return tuple(results), front
