@@ -135,6 +135,9 @@ def _bracket_from(counted, y0, tau, lower, upper, step, evaluations):
         if y == end:
             return y, y, int(direction)  # downhill all the way to the bracket's end
         probe = counted.on_grid(min(max(y + direction * step, lower), upper))
+        while probe == y and step > 0:  # a step below the grid spacing rounds back to y: no new point
+            step *= 2.0
+            probe = counted.on_grid(min(max(y + direction * step, lower), upper))
         g_probe = _checked_grad(counted, probe, tau)
         if (g_probe > 0) != (g_y > 0) or g_probe == 0.0:
             return (y, probe, 0) if direction > 0 else (probe, y, 0)
