@@ -142,6 +142,9 @@ def test_reference_programs_are_counted_once_per_point():
     ev = Evaluator(Bowl())
     ev.reference(3.0), ev.e_reference(3.0), ev.reference(4.0)
     assert ev.reference_count == 2 and ev.counts["hard"] == 0
+    assert ev.reference_points() == [(3.0,), (4.0,)] and ev.hard_points() == []
+    ev.e_hard(5.0)
+    assert ev.hard_points() == [(5.0,)]
 
 
 def test_deterministic_reference_below_one_metre_has_zero_standard_error():
