@@ -17,12 +17,13 @@ import numpy as np
 import pytest
 
 from diffsense import config as cfg
-from diffsense.metrics import ReferenceEvaluation
+from diffsense.metrics import ReferenceEvaluation, make_objective
 from diffsense.sensors import Radar, load_config
 from diffsense.sensors._laws import RadarDetection
 from diffsense.solve import Evaluator
 from diffsense.solve._box_fns import BoxFunctions
-from tests._toy_pipeline import toy_objective
+from diffsense.tracks import prediction_frames
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_objective, toy_scenes
 
 
 class _Hard(NamedTuple):
@@ -182,9 +183,12 @@ def test_a_float32_objective_runs_in_float32_and_hands_back_float64_gradients():
 
 
 def test_detections_are_hard_by_default():
-    E = toy_objective(n=2, instants=2)
+    """A Swerling I radar's hard detections: each the median of its random event (0 or 1)."""
+    scenes, scenario = toy_scenes(1)
+    E = make_objective(scenes, scenario, prediction_frames(scenes.num_frames)[:2], RandomLawBowl().sensor,
+                       ToyPredictor(jnp.asarray(TOY_GAIN)), names=("hfov_deg",), shard=False)
     ev = Evaluator(E)
-    default, hard, soft = ev.detections(42.0), ev.detections(42.0, "hard"), ev.detections(42.0, "soft")
+    default, hard, soft = ev.detections(60.0), ev.detections(60.0, "hard"), ev.detections(60.0, "soft")
     p = np.asarray(default.p_detect)
     assert np.array_equal(p, np.asarray(hard.p_detect)) and set(np.unique(p)) <= {0.0, 1.0}
     assert not np.array_equal(p, np.asarray(soft.p_detect))
