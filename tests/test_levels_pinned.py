@@ -6,6 +6,9 @@ with a host gradient that records where it is asked.
   reaches two neighbouring float32 numbers around the root c of g(r) = r - c. Neither spends
   an evaluation on a point already asked: every point is asked once, and the answer is one
   float32 spacing from c at most.
+- The walk's steps from 0.5 upwards (the root at 0.7), in float32 spacings above 0.5 (2^-24):
+  steps of 2^k 1e-12 round back to 0.5 until k = 15 (0.55 spacings), then each doubles:
+  0.55, 1.1, 2.2, 4.4, 8.8 spacings, on the grid 1, 1, 2, 4, 9: points 1, 2, 4, 8, 17.
 - The secant on g(r) = r - 6 over [0, 8] from 0.5 (first probe 2.5) with a budget of 2
   gradient evaluations asks g twice: at 0.5 and 2.5.
 """
@@ -42,6 +45,12 @@ def test_bisection_on_a_float32_grid_asks_no_point_twice(c):
     assert len(asked) == len(set(asked)) == evaluations < 200
     assert bound == 0 and converged
     assert r == float(np.float32(r)) and abs(r - c) <= float(np.spacing(np.float32(c)))
+
+
+def test_the_walk_doubles_its_step_from_the_first_that_leaves_the_start():
+    counted, asked = _recording(0.7, jnp.float32)
+    level_bisection(counted, 0.5, 1.0, 0.0, 1.0, 1e-12, 200)
+    assert [(r - 0.5) / 2.0**-24 for r in asked[:6]] == [0.0, 1.0, 2.0, 4.0, 8.0, 17.0]
 
 
 def test_secant_stops_at_its_budget():
