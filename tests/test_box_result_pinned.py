@@ -24,6 +24,7 @@ import pytest
 
 from diffsense.solve._box import BoxConfig, box_solve
 from diffsense.solve._box_fns import BoxFunctions
+from diffsense.solve._box_space import halton
 from diffsense.solve._pareto import _pareto_front
 
 BOUNDS = {"range_m": (0.0, 20.0)}
@@ -93,3 +94,10 @@ def test_pareto_front_by_hand():
     points = [(1.0, 2.0), (1.0, 1.0), (2.0, 1.0), (0.5, 3.0), (0.5, 3.0)]
     # (1, 2) is beaten on cost at equal E, (2, 1) on E at equal cost; equal points keep each other.
     assert _pareto_front(points) == (False, True, False, True, True)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_seed_shifts_the_hard_sample(seed):
+    result = box_solve(_flat_bowl(), BOUNDS, BoxConfig(starts=0, seed=seed))
+    sample = [e.x[0] for e in result.history if e.kind == "hard"]
+    assert sample == (20.0 * halton(4, 1, seed)[:, 0]).tolist()
