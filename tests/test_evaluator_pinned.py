@@ -192,3 +192,5 @@ def test_detections_are_hard_by_default():
     p = np.asarray(default.p_detect)
     assert np.array_equal(p, np.asarray(hard.p_detect)) and set(np.unique(p)) <= {0.0, 1.0}
     assert not np.array_equal(p, np.asarray(soft.p_detect))
+    # Hard detections have no temperature: the default tau is not read in hard mode.
+    assert np.array_equal(p, np.asarray(ev.detections(60.0, "hard", 2.0).p_detect))
