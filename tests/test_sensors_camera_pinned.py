@@ -114,3 +114,21 @@ def test_confidence_law_scales_the_mean_by_the_unhidden_fraction():
     params = sensor.make_params(CONFIDENCE, hfov_deg=30.0)
     p = float(sensor.camera_p_detect(scene, params, CONFIDENCE, mode="hard")[0, 2])
     assert p == pytest.approx(phi, rel=1e-6)
+
+
+def test_confidence_law_reads_the_cars_width_in_pixels():
+    # HFOV 180 deg: k = 1280 / pi = 407.437 px/rad; the car 72 m ahead is k 2 atan(0.9 / 72) =
+    # 10.18539 px wide, near the law's 10 px half point: size = sigmoid(0.18539 / 2) = 0.52316,
+    # mean = 0.95 size = 0.49700, P(confidence >= 0.6) = Phi((mean - 0.6) / 0.1) = 0.15150. The
+    # range term: sigma_Z = 72^2 0.5 / (k 0.12) = 53.014 m, P(72 + N(0, sigma_Z) <= 100) =
+    # Phi(28 / 53.014) = 0.70131. (Read as 3 atan(0.9 / 72) wide, p would be 0.700.)
+    k = 1280.0 / math.pi
+    size = _sigmoid((_width_px(k, 72.0) - 10.0) / 2.0)
+    confidence = 0.5 * math.erfc(-(0.95 * size - 0.6) / 0.1 / math.sqrt(2.0))
+    sigma_z = math.hypot(72.0**2 * 0.5 / (k * 0.12), 1e-3)
+    in_range = 0.5 * math.erfc(-(28.0 / sigma_z) / math.sqrt(2.0))
+    assert confidence == pytest.approx(0.15150, abs=1e-5) and in_range == pytest.approx(0.70131, abs=1e-5)
+    params = sensor.make_params(CONFIDENCE, hfov_deg=180.0)
+    p = float(sensor.camera_p_detect(_car(72.0), params, CONFIDENCE, mode="hard")[0, 1])
+    # The scene is float32: its 1e-7 relative rounding of the width moves p by 2e-6 here (steep Phi).
+    assert p == pytest.approx(confidence * in_range, rel=1e-5)
