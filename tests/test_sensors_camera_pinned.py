@@ -9,6 +9,7 @@ its image is k * 2 atan(0.9 / R) px wide.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -18,7 +19,7 @@ from test_sensor_scenes import make_scene
 
 from diffsense import config as cfg
 from diffsense import sensors as sensor
-from diffsense.sensors._camera import _camera_terms
+from diffsense.sensors._camera import _camera_terms, camera_accuracy_px_per_rad
 from diffsense.sensors._geometry import Tracks
 from diffsense.sensors._laws import CameraDetection
 
@@ -132,3 +133,11 @@ def test_confidence_law_reads_the_cars_width_in_pixels():
     p = float(sensor.camera_p_detect(_car(72.0), params, CONFIDENCE, mode="hard")[0, 1])
     # The scene is float32: its 1e-7 relative rounding of the width moves p by 2e-6 here (steep Phi).
     assert p == pytest.approx(confidence * in_range, rel=1e-5)
+
+
+@pytest.mark.parametrize("hfov", [30, 30.0])
+def test_paper_profile_accuracy_is_the_focal_length_whatever_the_hfovs_type(hfov):
+    # An HFOV given as an integer must not make the fixed focal length an integer (2400.5 px/rad).
+    paper = cfg.replace(CAMERA, accuracy_follows_hfov=False, focal_length_px=2400.5)
+    params = dataclasses.replace(CAMERA.params, hfov_deg=hfov)
+    assert float(camera_accuracy_px_per_rad(params, paper)) == 2400.5
