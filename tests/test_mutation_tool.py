@@ -58,3 +58,13 @@ def test_wilson_interval_solves_the_score_equation():
     k, n, z = 63, 70, 1.959963984540054
     for p in mutation.wilson_interval(k, n):
         assert math.isclose((k / n - p) ** 2, z * z * p * (1 - p) / n, rel_tol=1e-9)
+
+
+def test_triage_refuses_a_workdir_without_a_run(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location(
+        "mutation_triage", Path(__file__).resolve().parents[1] / "tools" / "mutation_triage.py")
+    triage = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(triage)
+    assert triage.main([str(tmp_path), "tests/test_sensor_numerics.py"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "no mutants/ folder" in err and err.count("\n") == 1

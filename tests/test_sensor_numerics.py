@@ -49,6 +49,10 @@ def test_atan2_and_norm_are_zero_with_zero_gradient_at_the_origin():
     np.testing.assert_allclose(jax.grad(lambda v: geo.safe_atan2(v[0], v[1]))(jnp.array([3.0, 4.0])),
                                [4 / 25, -3 / 25], rtol=1e-6)  # the polynomial's slope error
     assert float(geo.safe_norm(-3.0, 4.0)) == 5.0
+    # below a metre too (a car beside the sensor): 0.5 m, not the origin's 0
+    assert float(geo.safe_norm(0.3, -0.4)) == pytest.approx(0.5, rel=1e-12)
+    np.testing.assert_allclose(jax.grad(lambda v: geo.safe_norm(v[0], v[1]))(jnp.array([0.3, -0.4])),
+                               [0.6, -0.8], rtol=1e-12)
 
 
 def test_wrap_angle():
