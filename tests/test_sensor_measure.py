@@ -99,3 +99,16 @@ def test_padding_slots_hide_nothing_and_hard_output_keeps_float32(mode):
     p = sensor.p_detect(scene, CAMERA.params, CAMERA, mode=mode)
     assert p.dtype == np.float32
     assert float(p[0, 1]) > 0.99 and float(p[0, 2]) == 0.0
+
+
+def test_measurement_noise_is_one_range_and_one_azimuth_draw_per_frame_and_vehicle():
+    # 3 frames, 2 vehicles: draws [2, 3, 2]; a batch of 4 scenes: [4, 2, 3, 2]. Passing the draws
+    # gives what passing their key gives.
+    one = make_scene([[0.0, 40.0]] * 3, [[0.0, 2.0]] * 3)
+    batch = jax.tree.map(lambda a: jnp.stack([a] * 4), one)
+    draws = sensor.measurement_noise(KEY, one)
+    assert draws.shape == (2, 3, 2)
+    assert sensor.measurement_noise(KEY, batch).shape == (4, 2, 3, 2)
+    by_key, by_draws = detect(one, CAMERA.params, CAMERA, KEY), detect(one, CAMERA.params, CAMERA, draws)
+    np.testing.assert_array_equal(np.asarray(by_key.x_m), np.asarray(by_draws.x_m))
+    np.testing.assert_array_equal(np.asarray(by_key.y_m), np.asarray(by_draws.y_m))
