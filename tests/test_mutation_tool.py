@@ -68,3 +68,14 @@ def test_triage_refuses_a_workdir_without_a_run(tmp_path, capsys):
     assert triage.main([str(tmp_path), "tests/test_sensor_numerics.py"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "no mutants/ folder" in err and err.count("\n") == 1
+
+
+def test_triage_refuses_focused_tests_that_do_not_pass_unmutated(tmp_path, capsys):
+    # a mistyped test path collects nothing (pytest exit 4): refused, not counted as kills
+    spec = importlib.util.spec_from_file_location(
+        "mutation_triage", Path(__file__).resolve().parents[1] / "tools" / "mutation_triage.py")
+    triage = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(triage)
+    (tmp_path / "mutants").mkdir()
+    assert triage.main([str(tmp_path), "tests/no_such_test_file.py"]) == 2
+    assert "do not pass on the unmutated tree" in capsys.readouterr().err

@@ -26,16 +26,22 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mutation import _diff, _results  # noqa: E402
 
 
-def _run_one(mutants: Path, name: str, tests: list[str], timeout_s: float) -> str:
-    """'killed', 'survived' or 'timeout' of one mutant against the focused tests."""
-    env = dict(os.environ, MUTANT_UNDER_TEST=name)
+def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float) -> str:
+    """'killed', 'survived', 'timeout' or 'error' of one mutant (None: none) against the tests.
+
+    Only failing tests (pytest exit 1) or a failed collection (2) count as a kill: a usage error
+    or no test collected (4, 5) is an 'error', so a mistyped test path cannot pass as a kill.
+    """
+    env = {k: v for k, v in os.environ.items() if k != "MUTANT_UNDER_TEST"}
+    if name is not None:
+        env["MUTANT_UNDER_TEST"] = name
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-m", "not slow",
            *tests]
     try:
         done = subprocess.run(cmd, cwd=mutants, env=env, capture_output=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:
         return "timeout"
-    return "survived" if done.returncode == 0 else "killed"
+    return {0: "survived", 1: "killed", 2: "killed"}.get(done.returncode, "error")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,6 +54,10 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.workdir / "mutants").is_dir():
         print(f"error: {args.workdir} holds no mutmut run (no mutants/ folder)", file=sys.stderr)
         return 2
+    if _run_one(args.workdir / "mutants", None, args.tests, args.timeout) != "survived":
+        print(f"error: the focused tests do not pass on the unmutated tree of {args.workdir}",
+              file=sys.stderr)
+        return 2
     todo = sorted(n for n, s in _results(args.workdir).items() if s == "not checked")
     start = time.monotonic()
     status = {}
@@ -59,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{len(status)}/{len(todo)} {futures[done]}: {status[futures[done]]}",
                   file=sys.stderr, flush=True)
     minutes = (time.monotonic() - start) / 60
-    counts = {s: sum(v == s for v in status.values()) for s in ("killed", "survived", "timeout")}
+    counts = {s: sum(v == s for v in status.values()) for s in ("killed", "survived", "timeout", "error")}
     lines = [f"# Triage of {len(todo)} unchecked mutants ({minutes:.1f} min)", "",
              "Focused tests: " + " ".join(args.tests), "",
              ", ".join(f"{k}: {v}" for k, v in counts.items()), "", "## Not killed", ""]
