@@ -60,11 +60,16 @@ def test_wilson_interval_solves_the_score_equation():
         assert math.isclose((k / n - p) ** 2, z * z * p * (1 - p) / n, rel_tol=1e-9)
 
 
-def test_triage_refuses_a_workdir_without_a_run(tmp_path, capsys):
+def _triage_module():
     spec = importlib.util.spec_from_file_location(
         "mutation_triage", Path(__file__).resolve().parents[1] / "tools" / "mutation_triage.py")
     triage = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(triage)
+    return triage
+
+
+def test_triage_refuses_a_workdir_without_a_run(tmp_path, capsys):
+    triage = _triage_module()
     assert triage.main([str(tmp_path), "tests/test_sensor_numerics.py"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "no mutants/ folder" in err and err.count("\n") == 1
@@ -72,10 +77,21 @@ def test_triage_refuses_a_workdir_without_a_run(tmp_path, capsys):
 
 def test_triage_refuses_focused_tests_that_do_not_pass_unmutated(tmp_path, capsys):
     # a mistyped test path collects nothing (pytest exit 4): refused, not counted as kills
-    spec = importlib.util.spec_from_file_location(
-        "mutation_triage", Path(__file__).resolve().parents[1] / "tools" / "mutation_triage.py")
-    triage = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(triage)
+    triage = _triage_module()
     (tmp_path / "mutants").mkdir()
     assert triage.main([str(tmp_path), "tests/no_such_test_file.py"]) == 2
     assert "do not pass on the unmutated tree" in capsys.readouterr().err
+
+
+def test_triage_selects_one_modules_unchecked_mutants():
+    triage = _triage_module()
+    results = {"diffsense.sensors._laws.x_swerling__mutmut_2": "not checked",
+               "diffsense.sensors._laws.x_swerling__mutmut_1": "not checked",
+               "diffsense.sensors._laws.x_pfa__mutmut_1": "killed",
+               "diffsense.sensors._lawsx.x_f__mutmut_1": "not checked",
+               "diffsense.sensors._params.xǁRadarParamsǁcheck__mutmut_1": "not checked"}
+    assert triage._unchecked(results, "_laws.py") == [
+        "diffsense.sensors._laws.x_swerling__mutmut_1", "diffsense.sensors._laws.x_swerling__mutmut_2"]
+    assert triage._unchecked(results, "_params") == [
+        "diffsense.sensors._params.xǁRadarParamsǁcheck__mutmut_1"]
+    assert len(triage._unchecked(results, None)) == 4

@@ -1,6 +1,7 @@
 """A fast first pass over the mutants a `tools/mutation.py` run left unchecked (docs/mutation.md).
 
     python tools/mutation_triage.py /tmp/mut/X tests/test_sensor_numerics.py tests/test_mounting.py
+    python tools/mutation_triage.py /tmp/mut/X tests/test_detection_laws.py --module _laws.py
 
 mutmut runs, for each mutant, every selected test that reaches the mutated function. For the
 small helpers every model calls (a safe norm, an angle wrap) that is the whole subset, in an order
@@ -10,6 +11,8 @@ a short list of focused tests instead, two at a time, stopping at the first fail
 mutmut's own switch (`MUTANT_UNDER_TEST` in the workdir's `mutants/` tree, the trampolines mutmut
 generated). It writes `<workdir>/triage.md`: the mutants the focused tests kill, and the ones they
 do not — those still need `tools/mutation.py ... --mutants NAME` (the whole subset) or a review.
+With `--module`, only that file's mutants are triaged (into `triage-<module>.md`), so one
+statistics pass over many files serves a triage per file, each with its own focused tests.
 """
 
 from __future__ import annotations
@@ -44,12 +47,24 @@ def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float
     return {0: "survived", 1: "killed", 2: "killed"}.get(done.returncode, "error")
 
 
+def _unchecked(results: dict[str, str], module: str | None) -> list[str]:
+    """The sorted names of the run's unchecked mutants, of one module when `module` is given
+    (a file name such as `_laws.py` or `_laws`: mutmut names a mutant `package.module.x_function
+    __mutmut_N`, so the module is everything before the last dot)."""
+    todo = [n for n, s in results.items() if s == "not checked"]
+    if module is not None:
+        stem = module.removesuffix(".py")
+        todo = [n for n in todo if n.rsplit(".", 1)[0].rsplit(".", 1)[-1] == stem]
+    return sorted(todo)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("workdir", type=Path, help="the --workdir of a tools/mutation.py run")
     parser.add_argument("tests", nargs="+", help="focused test files (paths in the repository)")
     parser.add_argument("--jobs", type=int, default=2, help="mutants at a time (default 2)")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant")
+    parser.add_argument("--module", help="triage only this file's mutants (e.g. _laws.py)")
     args = parser.parse_args(argv)
     if not (args.workdir / "mutants").is_dir():
         print(f"error: {args.workdir} holds no mutmut run (no mutants/ folder)", file=sys.stderr)
@@ -58,7 +73,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: the focused tests do not pass on the unmutated tree of {args.workdir}",
               file=sys.stderr)
         return 2
-    todo = sorted(n for n, s in _results(args.workdir).items() if s == "not checked")
+    todo = _unchecked(_results(args.workdir), args.module)
+    if not todo:
+        print(f"error: {args.workdir} has no unchecked mutants"
+              + (f" of {args.module}" if args.module else ""), file=sys.stderr)
+        return 2
     start = time.monotonic()
     status = {}
     with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
@@ -70,12 +89,14 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr, flush=True)
     minutes = (time.monotonic() - start) / 60
     counts = {s: sum(v == s for v in status.values()) for s in ("killed", "survived", "timeout", "error")}
-    lines = [f"# Triage of {len(todo)} unchecked mutants ({minutes:.1f} min)", "",
+    of = f" of {args.module}" if args.module else ""
+    lines = [f"# Triage of {len(todo)} unchecked mutants{of} ({minutes:.1f} min)", "",
              "Focused tests: " + " ".join(args.tests), "",
              ", ".join(f"{k}: {v}" for k, v in counts.items()), "", "## Not killed", ""]
     for name in (n for n in todo if status[n] != "killed"):
         lines += [f"### {name} ({status[name]})", "", "```diff", _diff(args.workdir, name), "```", ""]
-    (args.workdir / "triage.md").write_text("\n".join(lines))
+    out = "triage.md" if args.module is None else f"triage-{args.module.removesuffix('.py')}.md"
+    (args.workdir / out).write_text("\n".join(lines))
     print("\n".join(lines))
     return 0
 
