@@ -51,6 +51,10 @@ def test_detect_batch_is_detect_per_scene_with_the_drawn_noise():
     noise = jax.jit(sensor.measurement_noise)(KEY, scenes)
     assert noise.shape == (2, 2, *one.x_m.shape)
     _same(batch_detect(scenes, RADAR.params, RADAR, noise), batch)
+    # float32 draws under x64 are draws too, used as given, not taken for a key
+    noise32 = noise.astype(jnp.float32)
+    _same(batch_detect(scenes, RADAR.params, RADAR, noise32),
+          batch_detect(scenes, RADAR.params, RADAR, noise32.astype(noise.dtype)))
     single = jax.jit(sensor.detect, static_argnames=STATIC)
     for n in range(2):
         _same(jax.tree.map(lambda a: a[n], batch), single(one, RADAR.params, RADAR, noise[n]))
