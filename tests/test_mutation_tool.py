@@ -1,5 +1,6 @@
 """tools/mutation.py's pure parts: the sample's draw and the Wilson interval of its score."""
 
+import json
 import importlib.util
 import math
 from pathlib import Path
@@ -95,3 +96,23 @@ def test_triage_selects_one_modules_unchecked_mutants():
     assert triage._unchecked(results, "_params") == [
         "diffsense.sensors._params.xǁRadarParamsǁcheck__mutmut_1"]
     assert len(triage._unchecked(results, None)) == 4
+
+
+def test_triage_reach_runs_a_functions_tests_fastest_first_within_the_budget(tmp_path):
+    triage = _triage_module()
+    (tmp_path / "mutants").mkdir()
+    stats = {"duration_by_test": {"a": 5.0, "b": 1.0, "c": 30.0, "d": 2.0},
+             "tests_by_mangled_function_name": {"m.x_f": ["a", "b", "c"], "m.x_g": ["d"]}}
+    (tmp_path / "mutants" / "mutmut-stats.json").write_text(json.dumps(stats))
+    reaching = triage._reaching(tmp_path, 10.0)
+    assert reaching["m.x_f"] == (["b", "a"], False)  # c would pass the 10 s budget
+    assert reaching["m.x_g"] == (["d"], True)
+    assert triage._reaching(tmp_path, 0.5)["m.x_f"] == (["b"], False)  # at least one test
+    assert triage._run_planned(tmp_path, "m.x_h__mutmut_1", ([], True), 1.0) == "no tests"
+
+
+def test_triage_wants_focused_tests_or_reach_but_not_both(tmp_path, capsys):
+    triage = _triage_module()
+    assert triage.main([str(tmp_path)]) == 2
+    assert triage.main([str(tmp_path), "tests/test_x.py", "--reach", "60"]) == 2
+    assert capsys.readouterr().err.count("error: give focused tests or --reach") == 2

@@ -13,12 +13,20 @@ generated). It writes `<workdir>/triage.md`: the mutants the focused tests kill,
 do not — those still need `tools/mutation.py ... --mutants NAME` (the whole subset) or a review.
 With `--module`, only that file's mutants are triaged (into `triage-<module>.md`), so one
 statistics pass over many files serves a triage per file, each with its own focused tests.
+
+With `--reach SECONDS` (and no focused tests), each mutant instead runs the tests that the run's
+statistics pass saw reach its function, fastest first, until their recorded durations would pass
+SECONDS: mutmut runs the same tests in no particular order. A mutant whose reaching tests all fit
+in the budget and pass has survived mutmut's own check; one cut short says so ("not killed
+within budget") and needs the rest of its tests or a review.
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import concurrent.futures
+import json
 import os
 import subprocess
 import sys
@@ -47,6 +55,24 @@ def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float
     return {0: "survived", 1: "killed", 2: "killed"}.get(done.returncode, "error")
 
 
+def _reaching(workdir: Path, budget_s: float) -> dict[str, tuple[list[str], bool]]:
+    """mutmut's function name -> (its reaching tests, fastest first, within `budget_s` of
+    recorded duration; whether that is all of them), from the run's statistics pass."""
+    stats = json.loads((workdir / "mutants" / "mutmut-stats.json").read_text())
+    duration = stats["duration_by_test"]
+    out = {}
+    for function, tests in stats["tests_by_mangled_function_name"].items():
+        ordered = sorted(tests, key=lambda t: (duration.get(t, 0.0), t))
+        chosen, total = [], 0.0
+        for test in ordered:
+            if chosen and total + duration.get(test, 0.0) > budget_s:
+                break
+            chosen.append(test)
+            total += duration.get(test, 0.0)
+        out[function] = (chosen, len(chosen) == len(ordered))
+    return out
+
+
 def _unchecked(results: dict[str, str], module: str | None) -> list[str]:
     """The sorted names of the run's unchecked mutants, of one module when `module` is given
     (a file name such as `_laws.py` or `_laws`: mutmut names a mutant `package.module.x_function
@@ -58,18 +84,40 @@ def _unchecked(results: dict[str, str], module: str | None) -> list[str]:
     return sorted(todo)
 
 
+def _plans(args, todo: list[str]) -> dict[str, tuple[list[str], bool]]:
+    """Each mutant's tests and whether they are all the tests that reach it."""
+    if args.reach is None:
+        return {n: (args.tests, True) for n in todo}  # "survived": the focused tests pass
+    reaching = _reaching(args.workdir, args.reach)
+    return {n: reaching.get(n.partition("__mutmut_")[0], ([], True)) for n in todo}
+
+
+def _run_planned(mutants: Path, name: str, plan: tuple[list[str], bool], timeout_s: float) -> str:
+    tests, complete = plan
+    if not tests:
+        return "no tests"
+    status = _run_one(mutants, name, tests, timeout_s)
+    return "not killed within budget" if status == "survived" and not complete else status
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("workdir", type=Path, help="the --workdir of a tools/mutation.py run")
-    parser.add_argument("tests", nargs="+", help="focused test files (paths in the repository)")
+    parser.add_argument("tests", nargs="*", help="focused test files (paths in the repository)")
     parser.add_argument("--jobs", type=int, default=2, help="mutants at a time (default 2)")
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant")
     parser.add_argument("--module", help="triage only this file's mutants (e.g. _laws.py)")
+    parser.add_argument("--reach", type=float, metavar="SECONDS",
+                        help="instead of focused tests: each mutant's reaching tests, fastest first")
     args = parser.parse_args(argv)
+    if (args.reach is None) == (not args.tests):
+        print("error: give focused tests or --reach SECONDS (one of the two)", file=sys.stderr)
+        return 2
     if not (args.workdir / "mutants").is_dir():
         print(f"error: {args.workdir} holds no mutmut run (no mutants/ folder)", file=sys.stderr)
         return 2
-    if _run_one(args.workdir / "mutants", None, args.tests, args.timeout) != "survived":
+    if args.reach is None and _run_one(args.workdir / "mutants", None, args.tests,
+                                       args.timeout) != "survived":
         print(f"error: the focused tests do not pass on the unmutated tree of {args.workdir}",
               file=sys.stderr)
         return 2
@@ -78,27 +126,35 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {args.workdir} has no unchecked mutants"
               + (f" of {args.module}" if args.module else ""), file=sys.stderr)
         return 2
+    plans = _plans(args, todo)
     start = time.monotonic()
     status = {}
     with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
-        futures = {pool.submit(_run_one, args.workdir / "mutants", n, args.tests, args.timeout): n
+        futures = {pool.submit(_run_planned, args.workdir / "mutants", n, plans[n], args.timeout): n
                    for n in todo}
         for done in concurrent.futures.as_completed(futures):
             status[futures[done]] = done.result()
             print(f"{len(status)}/{len(todo)} {futures[done]}: {status[futures[done]]}",
                   file=sys.stderr, flush=True)
-    minutes = (time.monotonic() - start) / 60
-    counts = {s: sum(v == s for v in status.values()) for s in ("killed", "survived", "timeout", "error")}
+    _write_report(args, todo, status, (time.monotonic() - start) / 60)
+    return 0
+
+
+def _write_report(args, todo: list[str], status: dict[str, str], minutes: float) -> None:
+    counts = collections.Counter(status.values())
     of = f" of {args.module}" if args.module else ""
+    tests = (f"each mutant's reaching tests, fastest first, within {args.reach:g} s"
+             if args.reach is not None else " ".join(args.tests))
     lines = [f"# Triage of {len(todo)} unchecked mutants{of} ({minutes:.1f} min)", "",
-             "Focused tests: " + " ".join(args.tests), "",
-             ", ".join(f"{k}: {v}" for k, v in counts.items()), "", "## Not killed", ""]
+             "Tests: " + tests, "",
+             ", ".join(f"{k}: {counts[k]}" for k in ("killed", "survived", "not killed within budget",
+                                                      "timeout", "no tests", "error")),
+             "", "## Not killed", ""]
     for name in (n for n in todo if status[n] != "killed"):
         lines += [f"### {name} ({status[name]})", "", "```diff", _diff(args.workdir, name), "```", ""]
     out = "triage.md" if args.module is None else f"triage-{args.module.removesuffix('.py')}.md"
     (args.workdir / out).write_text("\n".join(lines))
     print("\n".join(lines))
-    return 0
 
 
 if __name__ == "__main__":
