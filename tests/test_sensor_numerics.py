@@ -186,16 +186,22 @@ def test_detect_batch_passes_mode_and_temperature_through():
     pytest.param("radar", marks=pytest.mark.xfail(strict=True, reason=(
         "radar_gain_dbi is a strong float64 under x64 (jnp.log10 of a weak scalar is not weak), "
         "so the SNR, the radar's p and noise scales promote a float32 scene to float64"))),
-    "camera", "camera hard", "camera paper hard",
+    "camera", "camera hard", "camera paper hard", "camera confidence",
 ])
 def test_float32_scenes_stay_float32(name):
     # Every array the sensor returns has the scene's dtype (no silent float64 promotion), in
-    # either mode and profile (the paper profile's hard gates and occlusion order included).
+    # either mode and profile (the paper profile's hard gates and occlusion order included) and
+    # under the confidence law.
     from diffsense import sensors as sensor
 
     sensor_name, *rest = name.split()
     mode = "hard" if "hard" in rest else "soft"
     config = sensor.load_config(sensor_name, profile="paper" if "paper" in rest else "physical")
+    if "confidence" in rest:  # the detector-confidence law (its visible fraction at the edge)
+        from diffsense import config as cfg
+        from diffsense.sensors._laws import CameraDetection
+
+        config = cfg.replace(config, detection=CameraDetection(law="confidence"))
     scene = make_scene([[0.0, 40.0, 60.0]], [[0.0, 1.0, -3.0]], dtype=np.float32)
     det = jax.jit(sensor.detect, static_argnames=("config", "mode"))(
         scene, config.params, config, jax.random.key(0, impl="rbg"), mode=mode)
