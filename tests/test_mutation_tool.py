@@ -116,3 +116,10 @@ def test_triage_wants_focused_tests_or_reach_but_not_both(tmp_path, capsys):
     assert triage.main([str(tmp_path)]) == 2
     assert triage.main([str(tmp_path), "tests/test_x.py", "--reach", "60"]) == 2
     assert capsys.readouterr().err.count("error: give focused tests or --reach") == 2
+
+
+def test_triage_counts_a_broken_conftest_as_a_kill_and_a_missing_path_as_an_error():
+    triage = _triage_module()
+    assert triage._status(4, b"ImportError while loading conftest '/x/tests/conftest.py'.") == "killed"
+    assert triage._status(4, b"ERROR: file or directory not found: tests/nope.py") == "error"
+    assert [triage._status(rc, b"") for rc in (0, 1, 2, 5)] == ["survived", "killed", "killed", "error"]

@@ -40,8 +40,9 @@ from mutation import _diff, _results  # noqa: E402
 def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float) -> str:
     """'killed', 'survived', 'timeout' or 'error' of one mutant (None: none) against the tests.
 
-    Only failing tests (pytest exit 1) or a failed collection (2) count as a kill: a usage error
-    or no test collected (4, 5) is an 'error', so a mistyped test path cannot pass as a kill.
+    Only failing tests (pytest exit 1), a failed collection (2) or a conftest the mutant breaks
+    count as a kill: another usage error or no test collected (4, 5) is an 'error', so a
+    mistyped test path cannot pass as a kill.
     """
     env = {k: v for k, v in os.environ.items() if k != "MUTANT_UNDER_TEST"}
     if name is not None:
@@ -52,7 +53,15 @@ def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float
         done = subprocess.run(cmd, cwd=mutants, env=env, capture_output=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:
         return "timeout"
-    return {0: "survived", 1: "killed", 2: "killed"}.get(done.returncode, "error")
+    return _status(done.returncode, done.stdout + done.stderr)
+
+
+def _status(returncode: int, output: bytes) -> str:
+    """pytest's exit -> status. A conftest that cannot be imported (exit 4) is a kill too: the
+    mutant breaks a config load every test run makes, so no test can start."""
+    if returncode == 4 and b"ImportError while loading conftest" in output:
+        return "killed"
+    return {0: "survived", 1: "killed", 2: "killed"}.get(returncode, "error")
 
 
 def _reaching(workdir: Path, budget_s: float) -> dict[str, tuple[list[str], bool]]:
