@@ -92,6 +92,10 @@ def test_koschmieder_by_hand():
     # C0 = 0.5 reaches 2 % where exp(-beta r) = 0.04: r = V ln 25 / ln 50.
     np.testing.assert_allclose(w.contrast_range_m(beta, 0.5), 200.0 * math.log(25) / math.log(50), rtol=1e-12)
     np.testing.assert_allclose(w.visibility_m(beta), 200.0, rtol=1e-12)
+    # integer inputs are numbers, not integer arrays: beta = 2 /m, C0 = 0.5 reaches 2 % at
+    # ln(0.5 / 0.02) / 2 m (an integer beta must not round C0 down to 0)
+    np.testing.assert_allclose(w.contrast_range_m(2, 0.5), math.log(25) / 2, rtol=1e-12)
+    np.testing.assert_allclose(w.visibility_m(jnp.asarray(2)), w.KOSCHMIEDER_CONSTANT / 2, rtol=1e-12)
 
 
 def test_rain_lowers_the_camera_visibility():
