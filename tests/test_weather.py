@@ -96,6 +96,9 @@ def test_koschmieder_by_hand():
     # ln(0.5 / 0.02) / 2 m (an integer beta must not round C0 down to 0)
     np.testing.assert_allclose(w.contrast_range_m(2, 0.5), math.log(25) / 2, rtol=1e-12)
     np.testing.assert_allclose(w.visibility_m(jnp.asarray(2)), w.KOSCHMIEDER_CONSTANT / 2, rtol=1e-12)
+    # the camera's extinction is dry unless a rain rate is given; the range keeps beta's precision
+    np.testing.assert_allclose(w.camera_extinction_1pm(200.0), w.KOSCHMIEDER_CONSTANT / 200.0, rtol=1e-12)
+    assert w.contrast_range_m(np.float32(0.02), np.float64(0.5)).dtype == np.float32
 
 
 def test_rain_lowers_the_camera_visibility():
