@@ -75,6 +75,25 @@ def test_rain_at_77_ghz_matches_a_numpy_evaluation_of_the_regressions():
     np.testing.assert_allclose(gamma_v, [5.75, 10.99, 17.94, 29.29], atol=5e-3)
 
 
+def test_rain_at_any_polarisation_tilt_and_elevation_mixes_h_and_v_as_p838_says():
+    # P.838-3 eqs. (4), (5) with tau = 30 deg, theta = 20 deg: c = cos^2(theta) cos(2 tau)
+    c = math.cos(math.radians(20.0)) ** 2 * 0.5
+    kh, kv = numpy_coefficient("kH", 77.0), numpy_coefficient("kV", 77.0)
+    ah, av = numpy_coefficient("aH", 77.0), numpy_coefficient("aV", 77.0)
+    k_ref = (kh + kv + (kh - kv) * c) / 2
+    alpha_ref = (kh * ah + kv * av + (kh * ah - kv * av) * c) / (2 * k_ref)
+    got = w.rain_coefficients(77.0, math.radians(30.0), math.radians(20.0))
+    np.testing.assert_allclose(got, (k_ref, alpha_ref), rtol=1e-12)
+
+
+def test_rain_attenuation_takes_the_precision_of_all_its_inputs():
+    rate = np.float32(10.0)
+    assert w.rain_specific_attenuation_db_per_km(rate).dtype == np.float32  # Python defaults
+    assert w.rain_specific_attenuation_db_per_km(rate, np.float64(77.0)).dtype == np.float64
+    assert w.rain_specific_attenuation_db_per_km(rate, 77.0, np.float64(0.3)).dtype == np.float64
+    assert w.rain_specific_attenuation_db_per_km(rate, 77.0, 0.0, np.float64(0.1)).dtype == np.float64
+
+
 def test_two_way_loss_crosses_the_rain_twice():
     gamma = numpy_coefficient("kH", 77.0) * 100.0 ** numpy_coefficient("aH", 77.0)
     # 100 m out and back through 100 mm/h: 2 x 0.1 km x gamma.

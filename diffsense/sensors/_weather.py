@@ -99,7 +99,7 @@ def rain_coefficients(
     log_f = jnp.log10(_float(frequency_ghz))
     k_h, k_v = 10.0 ** _regression(_K_H, log_f), 10.0 ** _regression(_K_V, log_f)
     a_h, a_v = _regression(_ALPHA_H, log_f), _regression(_ALPHA_V, log_f)
-    mix = jnp.cos(elevation_rad) ** 2 * jnp.cos(2.0 * jnp.asarray(tilt_rad, log_f.dtype))
+    mix = jnp.cos(elevation_rad) ** 2 * jnp.cos(2.0 * tilt_rad)
     k = 0.5 * (k_h + k_v + (k_h - k_v) * mix)
     alpha = 0.5 * (k_h * a_h + k_v * a_v + (k_h * a_h - k_v * a_v) * mix) / k
     return k, alpha
