@@ -84,6 +84,9 @@ def test_rain_at_any_polarisation_tilt_and_elevation_mixes_h_and_v_as_p838_says(
     alpha_ref = (kh * ah + kv * av + (kh * ah - kv * av) * c) / (2 * k_ref)
     got = w.rain_coefficients(77.0, math.radians(30.0), math.radians(20.0))
     np.testing.assert_allclose(got, (k_ref, alpha_ref), rtol=1e-12)
+    # 250 m out and back through 50 mm/h on that path: 2 x 0.25 km x k R^alpha
+    loss = w.rain_two_way_loss_db(250.0, 50.0, 77.0, math.radians(30.0), math.radians(20.0))
+    np.testing.assert_allclose(loss, 0.5 * k_ref * 50.0**alpha_ref, rtol=1e-12)
 
 
 def test_rain_attenuation_takes_the_precision_of_all_its_inputs():
