@@ -109,6 +109,7 @@ def test_triage_reach_runs_a_functions_tests_fastest_first_within_the_budget(tmp
     assert reaching["m.x_g"] == (["d"], True)
     assert triage._reaching(tmp_path, 0.5)["m.x_f"] == (["b"], False)  # at least one test
     assert triage._run_planned(tmp_path, "m.x_h__mutmut_1", ([], True), 1.0) == "no tests"
+    assert triage._fastest(tmp_path, 2) == ["b", "d"]  # the unmutated check of --reach
 
 
 def test_triage_wants_focused_tests_or_reach_but_not_both(tmp_path, capsys):

@@ -58,16 +58,27 @@ def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float
 
 def _status(returncode: int, output: bytes) -> str:
     """pytest's exit -> status. A conftest that cannot be imported (exit 4) is a kill too: the
-    mutant breaks a config load every test run makes, so no test can start."""
+    tree's tests pass unmutated (checked first), so the mutant broke what the conftest loads and
+    no test can start."""
     if returncode == 4 and b"ImportError while loading conftest" in output:
         return "killed"
     return {0: "survived", 1: "killed", 2: "killed"}.get(returncode, "error")
 
 
+def _stats(workdir: Path) -> dict:
+    return json.loads((workdir / "mutants" / "mutmut-stats.json").read_text())
+
+
+def _fastest(workdir: Path, n: int) -> list[str]:
+    """The statistics pass's n fastest tests."""
+    duration = _stats(workdir)["duration_by_test"]
+    return sorted(duration, key=lambda t: (duration[t], t))[:n]
+
+
 def _reaching(workdir: Path, budget_s: float) -> dict[str, tuple[list[str], bool]]:
     """mutmut's function name -> (its reaching tests, fastest first, within `budget_s` of
     recorded duration; whether that is all of them), from the run's statistics pass."""
-    stats = json.loads((workdir / "mutants" / "mutmut-stats.json").read_text())
+    stats = _stats(workdir)
     duration = stats["duration_by_test"]
     out = {}
     for function, tests in stats["tests_by_mangled_function_name"].items():
@@ -125,9 +136,11 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.workdir / "mutants").is_dir():
         print(f"error: {args.workdir} holds no mutmut run (no mutants/ folder)", file=sys.stderr)
         return 2
-    if args.reach is None and _run_one(args.workdir / "mutants", None, args.tests,
-                                       args.timeout) != "survived":
-        print(f"error: the focused tests do not pass on the unmutated tree of {args.workdir}",
+    # A broken tree would pass as every mutant killed: its tests must pass unmutated first
+    # (with --reach, the statistics pass's three fastest tests).
+    check = args.tests if args.reach is None else _fastest(args.workdir, 3)
+    if _run_one(args.workdir / "mutants", None, check, args.timeout) != "survived":
+        print(f"error: the tests do not pass on the unmutated tree of {args.workdir}",
               file=sys.stderr)
         return 2
     todo = _unchecked(_results(args.workdir), args.module)

@@ -48,7 +48,8 @@ def camera_accuracy_px_per_rad(params: CameraParams, config: CameraConfig) -> Fl
     object-list sensor whose accuracy is Table II's whatever the swept HFOV) [px/rad]."""
     if config.accuracy_follows_hfov:
         return camera_px_per_rad(params)
-    # weakly typed, as k is from float parameters: a float32 scene's measurements stay float32
+    # weakly typed, as the lens's k is from Python-number parameters: a float32 scene's
+    # measurements stay float32
     return jnp.asarray(config.focal_length_px)
 
 
