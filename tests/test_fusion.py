@@ -121,6 +121,10 @@ def test_soft_p_is_one_minus_the_product_of_misses():
              for m, h, k in zip((RADAR, CAMERA), (70.0, 100.0), keys)]
     p_r, p_c = (np.asarray(v[0].p_detect) for v in views)
     np.testing.assert_allclose(np.asarray(det.p_detect), 1.0 - (1.0 - p_r) * (1.0 - p_c), rtol=1e-12, atol=1e-15)
+    # the ego and the padding slot keep the scene's positions bit for bit (fusion of the
+    # members' equal reports would give them back only to rounding)
+    for got, want in ((det.x_m, sc.x_m), (det.y_m, sc.y_m)):
+        np.testing.assert_array_equal(np.asarray(got)[:, [0, -1]], np.asarray(want)[:, [0, -1]])
 
 
 def test_fused_covariance_is_below_each_detecting_members():
