@@ -119,8 +119,12 @@ def test_triage_wants_focused_tests_or_reach_but_not_both(tmp_path, capsys):
     assert capsys.readouterr().err.count("error: give focused tests or --reach") == 2
 
 
-def test_triage_counts_a_broken_conftest_as_a_kill_and_a_missing_path_as_an_error():
+def test_triage_counts_a_broken_conftest_or_test_module_as_a_kill_and_a_missing_path_as_an_error():
     triage = _triage_module()
     assert triage._status(4, b"ImportError while loading conftest '/x/tests/conftest.py'.") == "killed"
+    assert triage._status(4, b"ERROR tests/test_fusion.py - TypeError\nERROR: found no collectors for "
+                                b"tests/test_fusion.py::test_fuse_by_hand") == "killed"
     assert triage._status(4, b"ERROR: file or directory not found: tests/nope.py") == "error"
+    assert triage._status(4, b"ERROR: not found: tests/test_fusion.py::test_nope\n"
+                             b"(no match in any of [<Module test_fusion.py>])") == "error"
     assert [triage._status(rc, b"") for rc in (0, 1, 2, 5)] == ["survived", "killed", "killed", "error"]

@@ -57,10 +57,11 @@ def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float
 
 
 def _status(returncode: int, output: bytes) -> str:
-    """pytest's exit -> status. A conftest that cannot be imported (exit 4) is a kill too: the
-    tree's tests pass unmutated (checked first), so the mutant broke what the conftest loads and
-    no test can start."""
-    if returncode == 4 and b"ImportError while loading conftest" in output:
+    """pytest's exit -> status. A conftest or a test module that cannot be imported (exit 4 when
+    tests are named by node id) is a kill too: the tree's tests pass unmutated (the statistics
+    pass ran them all; the first check here reruns some), so the mutant broke what they load."""
+    broken = (b"ImportError while loading conftest", b"found no collectors for")
+    if returncode == 4 and any(b in output for b in broken):
         return "killed"
     return {0: "survived", 1: "killed", 2: "killed"}.get(returncode, "error")
 
