@@ -171,6 +171,21 @@ def test_gradients_finite_at_extremes_in_float32():
     assert all(np.isfinite(float(v)) for v in g32.values())
 
 
+def test_suite_detect_passes_temperature_and_weather_to_its_members():
+    sc = scene()
+    r = {"radar.hfov_deg": 70.0, "camera.hfov_deg": 100.0}
+    weather = Weather(rain_mm_h=40.0, fog_visibility_m=150.0)
+    fused = eqx.filter_jit(lambda s, sc, r, k, t, w: s.detect_with_covariance(sc, r, k, temperature=t,
+                                                                              weather=w)[0])
+    want = fused(SUITE, sc, r, KEY, 2.0, weather)
+    got = sensor_detect(SUITE, sc, r, KEY, "soft", 2.0, weather)
+    for a in ("p_detect", "x_m", "y_m"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, a)), np.asarray(getattr(want, a)))
+    # and both matter here: the clear, temperature-1 fusion differs
+    clear = fused(SUITE, sc, r, KEY, 1.0, CLEAR).p_detect
+    assert np.abs(np.asarray(clear) - np.asarray(want.p_detect)).max() > 1e-3
+
+
 def test_suite_names_specs_and_refusals():
     assert SUITE.kind == "suite" and SUITE.mount_x_m == 4.2
     names = [s.name for s in SUITE.param_specs()]
@@ -181,6 +196,11 @@ def test_suite_names_specs_and_refusals():
         SUITE.spec("hfov_deg")
     with pytest.raises(InputError, match="named twice: radar"):
         Suite((RADAR, RADAR))
+    with pytest.raises(InputError, match="named twice: radar "):  # the name given twice, not the first
+        Suite((CAMERA, RADAR, RADAR))
+    assert len(Suite((RADAR,) * 6, names=[f"r{i}" for i in range(6)]).members) == 6  # at most 6
+    with pytest.raises(InputError, match="a suite has 1 to 6 sensors, got 7"):
+        Suite((RADAR,) * 7, names=[f"r{i}" for i in range(7)])
     two = Suite((RADAR, RADAR), names=("front", "corner"))
     assert two.spec("corner.range_m").default == 100.0
     with pytest.raises(InputError, match="cannot be fused"):
