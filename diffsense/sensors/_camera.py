@@ -48,8 +48,11 @@ def camera_accuracy_px_per_rad(params: CameraParams, config: CameraConfig) -> Fl
     object-list sensor whose accuracy is Table II's whatever the swept HFOV) [px/rad]."""
     if config.accuracy_follows_hfov:
         return camera_px_per_rad(params)
-    # weakly typed, as the lens's k is from Python-number parameters: a float32 scene's
-    # measurements stay float32
+    # The float type of float parameters (as the lens's k has); for Python numbers or integers
+    # a weak type, so a float32 scene's measurements stay float32.
+    dtype = getattr(params.hfov_deg, "dtype", None)
+    if dtype is not None and jnp.issubdtype(dtype, jnp.floating):
+        return jnp.full_like(params.hfov_deg, config.focal_length_px)  # keeps a weak type too
     return jnp.asarray(config.focal_length_px)
 
 
