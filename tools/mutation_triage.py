@@ -40,8 +40,8 @@ from mutation import _diff, _results  # noqa: E402
 def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float) -> str:
     """'killed', 'survived', 'timeout' or 'error' of one mutant (None: none) against the tests.
 
-    Only failing tests (pytest exit 1), a failed collection (2) or a conftest the mutant breaks
-    count as a kill: another usage error or no test collected (4, 5) is an 'error', so a
+    Only failing tests (pytest exit 1), a failed collection (2) or a conftest or test module the
+    mutant breaks count as a kill: another usage error or no test collected (4, 5) is an 'error', so a
     mistyped test path cannot pass as a kill.
     """
     env = {k: v for k, v in os.environ.items() if k != "MUTANT_UNDER_TEST"}
