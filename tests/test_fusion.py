@@ -181,9 +181,10 @@ def test_suite_detect_passes_temperature_and_weather_to_its_members():
     got = sensor_detect(SUITE, sc, r, KEY, "soft", 2.0, weather)
     for a in ("p_detect", "x_m", "y_m"):
         np.testing.assert_array_equal(np.asarray(getattr(got, a)), np.asarray(getattr(want, a)))
-    # and both matter here: the clear, temperature-1 fusion differs
-    clear = fused(SUITE, sc, r, KEY, 1.0, CLEAR).p_detect
-    assert np.abs(np.asarray(clear) - np.asarray(want.p_detect)).max() > 1e-3
+    # and each matters here: the clear fusion, and the temperature-1 one, differ
+    for t, w in ((2.0, CLEAR), (1.0, weather)):
+        other = fused(SUITE, sc, r, KEY, t, w).p_detect
+        assert np.abs(np.asarray(other) - np.asarray(want.p_detect)).max() > 1e-3
 
 
 def test_suite_names_specs_and_refusals():
