@@ -181,10 +181,34 @@ def test_suite_detect_passes_temperature_and_weather_to_its_members():
     got = sensor_detect(SUITE, sc, r, KEY, "soft", 2.0, weather)
     for a in ("p_detect", "x_m", "y_m"):
         np.testing.assert_array_equal(np.asarray(getattr(got, a)), np.asarray(getattr(want, a)))
+    # the defaults are temperature 1 and clear weather
+    plain = eqx.filter_jit(lambda s, sc, r, k: s.detect_with_covariance(sc, r, k)[0])(SUITE, sc, r, KEY)
+    np.testing.assert_array_equal(np.asarray(plain.p_detect),
+                                  np.asarray(fused(SUITE, sc, r, KEY, 1.0, CLEAR).p_detect))
     # and each matters here: the clear fusion, and the temperature-1 one, differ
     for t, w in ((2.0, CLEAR), (1.0, weather)):
         other = fused(SUITE, sc, r, KEY, t, w).p_detect
         assert np.abs(np.asarray(other) - np.asarray(want.p_detect)).max() > 1e-3
+
+
+def test_suite_draws_given_as_arrays_are_the_keys_draws():
+    # member i draws from split(key, M)[i]; the draws [M, 2, T, V] may be given instead (float32
+    # draws too); with three members, three keys
+    from diffsense.sensors import measurement_noise
+
+    sc = scene()
+    run = eqx.filter_jit(lambda s, sc, k: s.detect(sc, {}, k))
+    for suite in (SUITE, Suite((RADAR, CAMERA, RADAR), names=("radar", "camera", "corner"))):
+        m = len(suite.members)
+        draws = jnp.stack([measurement_noise(k, sc) for k in jax.random.split(KEY, m)])
+        by_key, by_draws = run(suite, sc, KEY), run(suite, sc, draws)
+        by_draws32 = run(suite, sc, draws.astype(jnp.float32))
+        want32 = run(suite, sc, draws.astype(jnp.float32).astype(draws.dtype))
+        for a in ("p_detect", "x_m", "y_m"):
+            np.testing.assert_allclose(np.asarray(getattr(by_draws, a)), np.asarray(getattr(by_key, a)),
+                                       rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(np.asarray(getattr(by_draws32, a)), np.asarray(getattr(want32, a)),
+                                       rtol=1e-12, atol=1e-12)
 
 
 def test_suite_names_specs_and_refusals():
