@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 import diffsense as ds
-from diffsense.sensors import make_params
+from diffsense.sensors import Camera, Radar, make_params
 from diffsense.sensors._inspect import boresight_report
 from diffsense.sensors._config import load_config
 
@@ -50,6 +50,15 @@ def test_paper_camera_is_an_object_list_with_table_ii_accuracy():
     wide = boresight_report(make_params(physical, hfov_deg=180.0), physical, 80.0)
     k = 1280 / math.pi
     assert wide["depth_sigma_m"] == pytest.approx(80.0**2 * 0.5 / (k * 0.12), rel=1e-6)
+
+
+@pytest.mark.parametrize("cls", [Radar, Camera])
+def test_a_sensor_class_builds_the_profile_it_is_asked_for(cls):
+    paper, physical = cls.from_toml(profile="paper").config, cls.from_toml().config
+    assert paper == load_config(cls.kind, profile="paper") and physical == load_config(cls.kind)
+    assert paper != physical
+    if cls is Camera:  # the paper's camera is an object list: no resolvability gate
+        assert paper.min_width_px == 0.0 < physical.min_width_px
 
 
 def test_problem_profile_sets_the_paper_fill():
