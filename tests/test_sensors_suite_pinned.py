@@ -7,6 +7,8 @@ hard mode); the paper radar's gain is fixed at the 30 deg beam (configs/sensors/
 
 from __future__ import annotations
 
+import math
+
 import jax
 import numpy as np
 import pytest
@@ -14,7 +16,8 @@ from test_sensor_scenes import make_scene
 
 from diffsense.errors import InputError
 from diffsense.scene import CAR
-from diffsense.sensors import Radar, make_sensor
+from diffsense.sensors import Radar, make_sensor, register, sensor_names
+from diffsense.sensors import _sensor as sensor_module
 from diffsense.sensors._fusion import Suite
 from diffsense.sensors._member import Covariance, member_view
 from diffsense.sensors._config import load_config
@@ -75,3 +78,29 @@ def test_unknown_parameter_lists_the_known_ones():
     params = load_config("radar").params
     with pytest.raises(InputError, match=r"known: hfov_deg, vfov_deg, "):
         with_param(params, "hfov", 30.0)
+
+
+def test_a_suite_of_names_takes_the_profile_to_every_member():
+    suite = make_sensor(["radar", "camera"], profile="paper")
+    configs = [m.config for m in suite.members]
+    assert configs == [load_config("radar", profile="paper"), load_config("camera", profile="paper")]
+
+
+def test_the_registry_names_and_builds_a_factory_without_arguments(monkeypatch):
+    monkeypatch.setattr(sensor_module, "_REGISTRY", dict(sensor_module._REGISTRY))
+    register("toy_2", ToySensor)  # '_' and digits are allowed; ToySensor() takes no arguments
+    assert sensor_names() == ("radar", "camera", "toy_2")
+    assert isinstance(make_sensor("toy_2"), ToySensor)  # the default profile calls factory()
+    for bad in ("", "_", "a.b", "a-b", "a b"):  # "_" alone names nothing: no letter or digit
+        with pytest.raises(InputError, match="letters, digits and '_'"):
+            register(bad, ToySensor)
+    assert sensor_names() == ("radar", "camera", "toy_2")
+
+
+def test_detect_defaults_to_temperature_1():
+    # The toy's soft gate is sigmoid((range_m - distance) / (2 T)): the car 20 m ahead with a
+    # 22 m range is 1 / (1 + e^-1) = 0.7311 at T = 1, 1 / (1 + e^-0.5) = 0.6225 at T = 2.
+    toy, r = ToySensor(), {"range_m": 22.0}
+    p = float(toy.detect(_scene(), r, KEY).p_detect[0, 2])
+    assert p == pytest.approx(1.0 / (1.0 + math.exp(-1.0)), rel=1e-6)
+    assert p == float(toy.detect(_scene(), r, KEY, temperature=1.0).p_detect[0, 2])

@@ -91,9 +91,10 @@ _REGISTRY: dict[str, Callable[[], Sensor]] = {}
 def register(name: str, factory: Callable[..., Sensor]) -> None:
     """Make a sensor available by name (`ds.Problem(sensor=name)`): `factory()` builds it with
     its shipped constants, `factory(path, profile)` from a user TOML and a profile (a factory
-    that takes no arguments serves the default profile only)."""
+    that takes no arguments serves the default profile only). The name is letters, digits and
+    '_', at least one of them a letter or digit."""
     if not name or not name.replace("_", "").isalnum():
-        raise InputError(f"a sensor name is letters, digits and '_', got {name!r}")
+        raise InputError(f"a sensor name is letters, digits and '_', with a letter or digit, got {name!r}")
     _REGISTRY[name] = factory
 
 
