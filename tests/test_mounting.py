@@ -16,7 +16,8 @@ import pytest
 from test_sensor_scenes import make_scene, traffic_scene
 
 import diffsense as ds
-from diffsense.sensors import Camera, Mount, Radar
+from diffsense.sensors import Camera, Mount, Radar, load_config, make_params
+from diffsense.sensors._mount import mount_of
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,6 +116,24 @@ def test_a_sensor_config_mounted_outside_its_envelope_is_refused(tmp_path, text,
         Camera.from_toml(path)
 
 
+def test_a_sensor_config_on_its_envelopes_edges_is_accepted(tmp_path):
+    for x, y, yaw in ((-2.3, -0.9, -180.0), (4.2, 0.9, 180.0)):
+        path = tmp_path / "camera.toml"
+        path.write_text(f"mount_x_m = {x}\nmount_y_m = {y}\nyaw_deg = {yaw}\n")
+        config = Camera.from_toml(path).config
+        assert (config.mount_x_m, config.mount_y_m, config.yaw_deg) == (x, y, yaw)
+
+
+def test_the_mounting_of_parameters_in_radians_and_the_configs_where_they_leave_it():
+    config = load_config("radar")  # mounted 4.2 m ahead on the centre line, facing forward
+    assert mount_of(config.params, config) == Mount(x_m=4.2, y_m=0.0, yaw_rad=0.0)
+    turned = mount_of(make_params(config, yaw_deg=1, mount_x_m=-1.5, mount_y_m=0.4), config)
+    assert turned.yaw_rad == pytest.approx(math.pi / 180.0, rel=1e-15)  # 1 deg, an int too
+    assert (turned.x_m, turned.y_m) == (-1.5, 0.4)
+    # A static zero yaw stays the Python number 0.0, which the geometry skips.
+    assert type(mount_of(make_params(config, yaw_deg=0), config).yaw_rad) is float
+
+
 def test_a_mounting_outside_its_envelope_on_the_cli_is_one_line_exit_2_nothing_written(tmp_path):
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, "-m", "diffsense.optimise", "--sensor", "radar,camera",
@@ -137,3 +156,5 @@ def test_a_free_mount_x_widens_the_scenes_relevance_reach_to_its_front_bound():
     assert relevance_reach(spec, [camera])["sensor_reach_m"] == 2.5
     assert relevance_reach(spec, [camera, *stand_ins])["sensor_reach_m"] == 3.7
     assert relevance_stand_ins({"mount_x_m": (-1.0, 1.0)})[0].mount_x_m == 1.0  # a lone sensor's name
+    # The parameter's own name is the part after the last dot, however many prefixes it has.
+    assert [s.mount_x_m for s in relevance_stand_ins({"a.b.mount_x_m": (0.0, 2.0), "a.mount_x_m.x": (0.0, 3.0)})] == [2.0]
