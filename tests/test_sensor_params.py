@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import jax
+import numpy as np
 import pytest
 
 from diffsense import sensors as sensor
@@ -100,3 +101,48 @@ def test_malformed_radar_config_is_refused_naming_the_file(tmp_path, edit, messa
     with pytest.raises(InputError, match=message) as err:
         sensor.load_config("radar", path)
     assert str(path) in str(err.value)
+
+
+_LOSSES = ("system_loss_db", "atmospheric_loss_db_per_km", "occlusion_loss_db", "range_accuracy_m",
+           "azimuth_accuracy_deg", "range_resolution_m", "azimuth_resolution_deg")
+_CONSTANT_EDGES = [  # (sensor, constant, the constraint's edge (accepted), just past it (refused))
+    ("radar", "frequency_ghz", 1e-9, 0.0), ("radar", "noise_bandwidth_hz", 1e-9, 0.0),
+    ("radar", "antenna_efficiency", 1e-9, 0.0), ("radar", "antenna_efficiency", 1.0, 1.0 + 1e-9),
+    ("radar", "gain_beam_deg", 1e-9, 0.0), ("radar", "gain_beam_deg", 360.0, 360.0 + 1e-9),
+    *[("radar", name, 0.0, -1e-9) for name in _LOSSES],
+    ("camera", "disparity_error_px", 0.0, -1e-9), ("camera", "bearing_error_px", 0.0, -1e-9),
+    ("camera", "min_width_px", 0.0, -1e-9), ("camera", "focal_length_px", 1e-9, 0.0),
+    ("camera", "min_visible_fraction", 0.0, -1e-9), ("camera", "min_visible_fraction", 1.0, 1.0 + 1e-9),
+]
+
+
+@pytest.mark.parametrize("name, constant, edge, past", _CONSTANT_EDGES)
+def test_a_constant_on_its_edge_is_accepted_and_just_past_it_refused(name, constant, edge, past):
+    config = sensor.load_config(name)
+    assert getattr(dataclasses.replace(config, **{constant: edge}), constant) == edge
+    with pytest.raises(InputError, match=f"^{name} {constant} must be "):
+        dataclasses.replace(config, **{constant: past})
+
+
+@pytest.mark.parametrize("name", sensor.SENSORS)
+def test_every_soft_gate_temperature_must_be_positive(name):
+    temperature = sensor.load_config(name).temperature
+    for field in dataclasses.fields(temperature):
+        assert getattr(dataclasses.replace(temperature, **{field.name: 1e-9}), field.name) == 1e-9
+        with pytest.raises(InputError, match=f"^{name} temperature {field.name} must be > 0$"):
+            dataclasses.replace(temperature, **{field.name: 0.0})
+
+
+def test_a_refusal_states_the_domain_with_its_unit():
+    with pytest.raises(InputError, match=r"^radar hfov_deg = 400 is outside its domain \(0, 360\] deg$"):
+        sensor.make_params(sensor.load_config("radar"), hfov_deg=400.0)
+    with pytest.raises(InputError, match=r"^camera width_px = 0.5 is outside its domain \[1, 16384\] px$"):
+        sensor.make_params(sensor.load_config("camera"), width_px=0.5)
+
+
+def test_batched_values_are_left_to_the_caller_and_the_rest_still_checked():
+    config = sensor.load_config("radar")
+    for hfov in (np.array([30.0, 400.0]), np.array([400.0])):  # a sweep's batch, of one too
+        assert getattr(sensor.make_params(config, hfov_deg=hfov), "hfov_deg") is hfov
+    with pytest.raises(InputError, match="radar range_m = -5 is outside"):
+        sensor.make_params(config, hfov_deg=np.array([30.0, 400.0]), range_m=-5.0)
