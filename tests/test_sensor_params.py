@@ -146,3 +146,11 @@ def test_batched_values_are_left_to_the_caller_and_the_rest_still_checked():
         assert getattr(sensor.make_params(config, hfov_deg=hfov), "hfov_deg") is hfov
     with pytest.raises(InputError, match="radar range_m = -5 is outside"):
         sensor.make_params(config, hfov_deg=np.array([30.0, 400.0]), range_m=-5.0)
+
+
+@pytest.mark.parametrize("name", sensor.SENSORS)
+def test_a_mounting_outside_its_envelope_is_refused_naming_the_sensor(name):
+    config = sensor.load_config(name)
+    assert dataclasses.replace(config, mount_y_m=0.9).mount_y_m == 0.9
+    with pytest.raises(InputError, match=rf"^{name} mount_y_m = 1.5 is outside its envelope \[-0.9, 0.9\] m$"):
+        dataclasses.replace(config, mount_y_m=1.5)
