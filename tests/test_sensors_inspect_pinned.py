@@ -9,16 +9,18 @@ vehicle at least 10 px wide.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from diffsense.scene import CAR, EGO, TARGET, TRUCK
-from diffsense.sensors import make_params
+from diffsense.sensors import Camera, make_params
 from diffsense.sensors._inspect import boresight_report, coverage_field, probe_scene
 from diffsense.sensors._config import load_config
 
+ROOT = Path(__file__).resolve().parents[1]
 RADAR, CAMERA = load_config("radar"), load_config("camera")
 # At HFOV 180 deg the lens gives k = 1280 px / pi rad = 407.4 px/rad: a 1.8 m wide car spans the
 # 10 px out to 0.9 m / tan(5 px / k) = 73.33 m from the camera.
@@ -99,3 +101,14 @@ def test_boresight_reports_name_their_numbers():
     assert camera["width_px_at_range"] == pytest.approx(2.0 * math.atan(0.9 / 50.0) * K_WIDE, rel=1e-12)
     assert camera["resolvable_range_m"] == pytest.approx(RESOLVABLE_M, rel=1e-12)
     assert camera["effective_range_m"] == pytest.approx(RESOLVABLE_M, rel=1e-12)  # below the 100 m range
+
+
+def test_the_default_probe_is_the_4_5_m_car_also_where_its_length_counts():
+    # Under the confidence law the camera sees the share of the footprint's extent across the line
+    # of sight, |L sin(rel)| + |W cos(rel)|, inside its field: 14.4 deg off the axis, next to the
+    # 15-deg edge, a longer car pokes further out and is seen less.
+    camera = Camera.from_toml(ROOT / "configs" / "sensors" / "laws" / "camera_confidence.toml").config
+    x, y = np.array([53.0]), np.array([-13.0])
+    default = coverage_field(camera.params, camera, x, y)
+    np.testing.assert_array_equal(default, coverage_field(camera.params, camera, x, y, length_m=4.5, width_m=1.8))
+    assert coverage_field(camera.params, camera, x, y, length_m=5.5)[0, 0] < default[0, 0] - 0.01
