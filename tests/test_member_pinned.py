@@ -1,8 +1,10 @@
 """One member's view for fusion (`sensors/_member.py`): the line-of-sight covariance against hand
-values near the sensor and off the road's centre line, and the temperature check on the way in."""
+values near the sensor and off the road's centre line, the temperature check on the way in, and
+everything a custom member is handed."""
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import jax
@@ -12,8 +14,10 @@ import pytest
 from test_sensor_scenes import make_scene
 
 from diffsense.errors import InputError
-from diffsense.sensors._member import line_of_sight_covariance, member_view
+from diffsense.sensors._member import Covariance, line_of_sight_covariance, member_view
 from diffsense.sensors._suite import Radar
+from diffsense.sensors._weather import Weather
+from tests._toy_pipeline import ToySensor
 
 KEY = jax.random.key(6, impl="rbg")
 
@@ -42,3 +46,29 @@ def test_member_view_refuses_a_temperature_that_is_not_positive(temperature):
     scene = make_scene([[0.0, 30.0]], [[0.0, 0.0]])
     with pytest.raises(InputError, match="temperature must be a positive number"):
         member_view(radar, scene, radar.defaults(), KEY, "soft", temperature)
+
+
+class ShowsWhatItIsHanded(ToySensor):
+    """The toy sensor whose view shows its inputs: rain halves its p of the other vehicles; its
+    covariance is xx = range_m, xy = the rain rate, yy = the temperature (soft) or 100 (hard)."""
+
+    def _detect(self, scene, r, noise, mode, temperature, weather):
+        det = super()._detect(scene, r, noise, mode, temperature, weather)
+        factor = 0.5 if weather.rain_mm_h > 0 else 1.0
+        return dataclasses.replace(det, p_detect=det.p_detect.at[..., 1:].multiply(factor))
+
+    def measurement_covariance(self, scene, r, mode, temperature, weather) -> Covariance:
+        ones = jnp.ones(scene.x_m.shape)
+        return Covariance(xx=r["range_m"] * ones, xy=weather.rain_mm_h * ones,
+                          yy=(temperature if mode == "soft" else 100.0) * ones)
+
+
+@pytest.mark.parametrize("mode", ["soft", "hard"])
+def test_a_custom_member_is_handed_r_mode_temperature_and_weather(mode):
+    toy, scene = ShowsWhatItIsHanded(), make_scene([[0.0, 5.0]], [[0.0, 0.0]])
+    clear, _ = member_view(toy, scene, {"range_m": 7.0}, KEY, mode, 3.0)
+    det, cov = member_view(toy, scene, {"range_m": 7.0}, KEY, mode, 3.0, Weather(rain_mm_h=25.0))
+    assert float(clear.p_detect[0, 1]) > 0.5  # the car 5 m ahead is within the 7 m range
+    assert float(det.p_detect[0, 1]) == pytest.approx(0.5 * float(clear.p_detect[0, 1]), rel=1e-12)
+    yy = 3.0 if mode == "soft" else 100.0
+    assert (float(cov.xx[0, 1]), float(cov.xy[0, 1]), float(cov.yy[0, 1])) == (7.0, 25.0, yy)
