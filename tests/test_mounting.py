@@ -157,4 +157,5 @@ def test_a_free_mount_x_widens_the_scenes_relevance_reach_to_its_front_bound():
     assert relevance_reach(spec, [camera, *stand_ins])["sensor_reach_m"] == 3.7
     assert relevance_stand_ins({"mount_x_m": (-1.0, 1.0)})[0].mount_x_m == 1.0  # a lone sensor's name
     # The parameter's own name is the part after the last dot, however many prefixes it has.
-    assert [s.mount_x_m for s in relevance_stand_ins({"a.b.mount_x_m": (0.0, 2.0), "a.mount_x_m.x": (0.0, 3.0)})] == [2.0]
+    nested = relevance_stand_ins({"a.b.mount_x_m": (0.0, 2.0), "a.mount_x_m.x": (0.0, 3.0)})
+    assert [s.mount_x_m for s in nested] == [2.0]
