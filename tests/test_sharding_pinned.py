@@ -1,6 +1,6 @@
 """`shard_leading_axis` (`diffsense/metrics/_sharding.py`) by hand: one device leaves the variants
 as they are; on 4 simulated CPU devices 3 variants are padded with a copy of the last one at
-weight 0 and each device holds one row."""
+weight 0 and each device holds one row; a tree of one array is padded the same way."""
 
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ for n in (3, 4):
     out[n] = {"x": np.asarray(sx).tolist(), "w": np.asarray(sw).tolist(),
               "devices": len(sx.sharding.device_set),
               "shards": sorted(s.data.shape[0] for s in sx.addressable_shards)}
+out["one leaf"] = np.asarray(shard_leading_axis((np.arange(3.0),))[0]).tolist()  # no weights
 print(json.dumps(out))
 """
 
@@ -55,3 +56,4 @@ def test_four_devices_pad_with_zero_weight_and_split_the_rows():
     assert four["x"] == [[0, 1], [2, 3], [4, 5], [6, 7]] and four["w"] == [0.25] * 4
     for case in (three, four):
         assert case["devices"] == 4 and case["shards"] == [1, 1, 1, 1]  # one row per device
+    assert out["one leaf"] == [0.0, 1.0, 2.0, 2.0]  # a tree of one array is padded the same way
