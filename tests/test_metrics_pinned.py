@@ -62,6 +62,13 @@ def test_coverage_parts_of_hand_made_windows():
         "never": [False, False, True]}
 
 
+def test_coverage_classes_of_hand_made_windows():
+    # [at_instant, in_window, throughout]: seen only at the instant (the window's newest frame),
+    # only before it, throughout.
+    windows = jnp.array([[0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [1.0, 1.0, 1.0]])
+    np.testing.assert_array_equal(np.asarray(coverage_classes(windows)), [[1, 1, 0], [0, 1, 0], [1, 1, 1]])
+
+
 def test_objective_is_hashed_and_compared_by_identity():
     # Two objectives built alike are different keys (arrays are not hashable by value).
     a, b = toy_objective(n=1, instants=2), toy_objective(n=1, instants=2)
