@@ -143,7 +143,7 @@ def test_a_refusal_states_the_domain_with_its_unit():
 def test_batched_values_are_left_to_the_caller_and_the_rest_still_checked():
     config = sensor.load_config("radar")
     for hfov in (np.array([30.0, 400.0]), np.array([400.0])):  # a sweep's batch, of one too
-        assert getattr(sensor.make_params(config, hfov_deg=hfov), "hfov_deg") is hfov
+        assert sensor.make_params(config, hfov_deg=hfov).hfov_deg is hfov
     with pytest.raises(InputError, match="radar range_m = -5 is outside"):
         sensor.make_params(config, hfov_deg=np.array([30.0, 400.0]), range_m=-5.0)
 

@@ -48,20 +48,10 @@ def test_every_sensor_function_passes_the_weather_on(name):
     mode = "soft" if name == "radar" else "hard"
     p_fn = sensor.radar_p_detect if name == "radar" else sensor.camera_p_detect
     det_fn = sensor.radar_detect if name == "radar" else sensor.camera_detect
+    device = (sensor.Radar if name == "radar" else sensor.Camera)(config)  # the Sensor protocol
     clear = float(p_fn(scene, params, config, mode=mode)[0, 1])
     for p in (p_fn(scene, params, config, mode=mode, weather=weather),
-              det_fn(scene, params, config, KEY, mode=mode, weather=weather).p_detect):
+              det_fn(scene, params, config, KEY, mode=mode, weather=weather).p_detect,
+              device.detect(scene, {"hfov_deg": 60.0}, KEY, mode=mode, weather=weather).p_detect):
         assert float(p[0, 1]) < clear - 0.3, (clear, float(p[0, 1]))
 
-
-@pytest.mark.parametrize("cls", [sensor.Radar, sensor.Camera])
-def test_a_sensor_object_passes_the_weather_on(cls):
-    # The cases above, through the Sensor protocol's detect (what Problem and Suite call).
-    device = cls.from_toml()
-    scene = _ahead(device.config, 87.0 if cls is sensor.Radar else 60.0)
-    weather = RAIN if cls is sensor.Radar else FOG
-    mode = "soft" if cls is sensor.Radar else "hard"
-    r = {"hfov_deg": 60.0}
-    clear = float(device.detect(scene, r, KEY, mode=mode).p_detect[0, 1])
-    wet = float(device.detect(scene, r, KEY, mode=mode, weather=weather).p_detect[0, 1])
-    assert wet < clear - 0.3, (clear, wet)
