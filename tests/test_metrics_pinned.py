@@ -67,6 +67,8 @@ def test_coverage_classes_of_hand_made_windows():
     # only before it, throughout.
     windows = jnp.array([[0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [1.0, 1.0, 1.0]])
     np.testing.assert_array_equal(np.asarray(coverage_classes(windows)), [[1, 1, 0], [0, 1, 0], [1, 1, 1]])
+    # The classes keep the window's dtype: a float32 run is not promoted to float64 (x64 is on).
+    assert coverage_classes(windows.astype(jnp.float32)).dtype == jnp.float32
 
 
 def test_objective_is_hashed_and_compared_by_identity():
