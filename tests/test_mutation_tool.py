@@ -1,8 +1,9 @@
 """tools/mutation.py's pure parts: the sample's draw and the Wilson interval of its score."""
 
-import json
 import importlib.util
+import json
 import math
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -110,6 +111,31 @@ def test_triage_reach_runs_a_functions_tests_fastest_first_within_the_budget(tmp
     assert triage._reaching(tmp_path, 0.5)["m.x_f"] == (["b"], False)  # at least one test
     assert triage._run_planned(tmp_path, "m.x_h__mutmut_1", ([], True), 1.0) == "no tests"
     assert triage._fastest(tmp_path, 2) == ["b", "d"]  # the unmutated check of --reach
+
+
+def test_triage_with_a_compile_cache_first_runs_every_planned_test_unmutated_with_it(tmp_path, monkeypatch):
+    triage = _triage_module()
+    (tmp_path / "mutants").mkdir()
+    stats = {"duration_by_test": {"a": 5.0, "b": 1.0, "c": 30.0, "d": 2.0},
+             "tests_by_mangled_function_name": {"m.x_f": ["a", "b", "c"], "m.x_g": ["d"]}}
+    (tmp_path / "mutants" / "mutmut-stats.json").write_text(json.dumps(stats))
+    monkeypatch.setattr(triage, "_results", lambda w: {"m.x_f__mutmut_1": "not checked",
+                                                       "m.x_g__mutmut_1": "not checked"})
+    monkeypatch.setattr(triage, "_diff", lambda w, n: "")
+    runs = []
+
+    def fake_run(cmd, cwd, env, capture_output, timeout):
+        runs.append((cmd[cmd.index("not slow") + 1:], env.get("MUTANT_UNDER_TEST"),
+                     env.get("JAX_COMPILATION_CACHE_DIR"), env.get("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")))
+        return subprocess.CompletedProcess(cmd, 1 if "MUTANT_UNDER_TEST" in env else 0, b"", b"")
+
+    monkeypatch.setattr(triage.subprocess, "run", fake_run)
+    cache = str((tmp_path / "cache").resolve())
+    assert triage.main([str(tmp_path), "--reach", "10", "--jobs", "1", "--compile-cache", cache]) == 0
+    # the three fastest without the cache, then every planned test (c is past the budget) with it
+    assert runs[:2] == [(["b", "d", "a"], None, None, None), (["a", "b", "d"], None, cache, "0")]
+    assert sorted(runs[2:]) == [(["b", "a"], "m.x_f__mutmut_1", cache, "0"), (["d"], "m.x_g__mutmut_1", cache, "0")]
+    assert "(a shared compilation cache)" in (tmp_path / "triage.md").read_text()
 
 
 def test_triage_wants_focused_tests_or_reach_but_not_both(tmp_path, capsys):

@@ -19,6 +19,14 @@ statistics pass saw reach its function, fastest first, until their recorded dura
 SECONDS: mutmut runs the same tests in no particular order. A mutant whose reaching tests all fit
 in the budget and pass has survived mutmut's own check; one cut short says so ("not killed
 within budget") and needs the rest of its tests or a review.
+
+With `--compile-cache DIR`, every pytest run reads and writes JAX's persistent compilation cache
+in DIR. The cache is keyed by the compiled program itself, so a mutant that changes a program
+compiles its own, and the programs it leaves alone (scenes, the predictor, other stages) load
+instead of compiling: most of a mutant's time otherwise. The check that the tests pass
+unmutated then runs every test the mutants will run, filling the cache; a test the warm cache
+broke would fail there, not pass as a kill. (The tests that count compilations set a cache
+folder of their own.)
 """
 
 from __future__ import annotations
@@ -37,6 +45,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from mutation import _diff, _results  # noqa: E402
 
 
+_CACHE_ENV: dict[str, str] = {}  # set once by --compile-cache, before any run
+
+
 def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float) -> str:
     """'killed', 'survived', 'timeout' or 'error' of one mutant (None: none) against the tests.
 
@@ -44,7 +55,7 @@ def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float
     mutant breaks count as a kill: another usage error or no test collected (4, 5) is an 'error', so a
     mistyped test path cannot pass as a kill.
     """
-    env = {k: v for k, v in os.environ.items() if k != "MUTANT_UNDER_TEST"}
+    env = {k: v for k, v in os.environ.items() if k != "MUTANT_UNDER_TEST"} | _CACHE_ENV
     if name is not None:
         env["MUTANT_UNDER_TEST"] = name
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-m", "not slow",
@@ -130,7 +141,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--module", help="triage only this file's mutants (e.g. _laws.py)")
     parser.add_argument("--reach", type=float, metavar="SECONDS",
                         help="instead of focused tests: each mutant's reaching tests, fastest first")
+    parser.add_argument("--compile-cache", type=Path, metavar="DIR",
+                        help="share JAX's persistent compilation cache in DIR across the runs")
     args = parser.parse_args(argv)
+    _CACHE_ENV.clear()
     if (args.reach is None) == (not args.tests):
         print("error: give focused tests or --reach SECONDS (one of the two)", file=sys.stderr)
         return 2
@@ -140,9 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     # A broken tree would pass as every mutant killed: its tests must pass unmutated first
     # (with --reach, the statistics pass's three fastest tests).
     check = args.tests if args.reach is None else _fastest(args.workdir, 3)
-    if _run_one(args.workdir / "mutants", None, check, args.timeout) != "survived":
-        print(f"error: the tests do not pass on the unmutated tree of {args.workdir}",
-              file=sys.stderr)
+    if not _passes_unmutated(args, check):
         return 2
     todo = _unchecked(_results(args.workdir), args.module)
     if not todo:
@@ -150,6 +162,13 @@ def main(argv: list[str] | None = None) -> int:
               + (f" of {args.module}" if args.module else ""), file=sys.stderr)
         return 2
     plans = _plans(args, todo)
+    if args.compile_cache is not None:
+        _CACHE_ENV.update(JAX_COMPILATION_CACHE_DIR=str(args.compile_cache.resolve()),
+                          JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0",
+                          JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
+        # Every planned test, unmutated, with the cache: fills it, and shows it breaks none.
+        if not _passes_unmutated(args, sorted({t for tests, _ in plans.values() for t in tests})):
+            return 2
     start = time.monotonic()
     status = {}
     with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
@@ -163,11 +182,20 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _passes_unmutated(args, tests: list[str]) -> bool:
+    if _run_one(args.workdir / "mutants", None, tests, args.timeout * 4) == "survived":
+        return True
+    print(f"error: the tests do not pass on the unmutated tree of {args.workdir}", file=sys.stderr)
+    return False
+
+
 def _write_report(args, todo: list[str], status: dict[str, str], minutes: float) -> None:
     counts = collections.Counter(status.values())
     of = f" of {args.module}" if args.module else ""
     tests = (f"each mutant's reaching tests, fastest first, within {args.reach:g} s"
              if args.reach is not None else " ".join(args.tests))
+    if args.compile_cache is not None:
+        tests += " (a shared compilation cache)"
     lines = [f"# Triage of {len(todo)} unchecked mutants{of} ({minutes:.1f} min)", "",
              "Tests: " + tests, "",
              ", ".join(f"{k}: {counts[k]}" for k in ("killed", "survived", "not killed within budget",
