@@ -1,17 +1,19 @@
 """Boundaries of the cost model's input checks and the lone sensor's breakdown labels, coverage
-parts, the objective's identity and sq_error's default temperature, each pinned by hand (these
+parts, the target's window and the probability of a track, the objective's identity and sq_error's default temperature, each pinned by hand (these
 are surviving mutants of the partial mutation run of diffsense/metrics, docs/mutation.md)."""
 
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from diffsense.errors import InputError
 from diffsense.metrics._cost import CostTerm, SensorCost, cost_breakdown, load_costs
-from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_classes, coverage_parts
+from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_classes, coverage_parts, p_tracked, target_window
+from diffsense.scene import TARGET_INDEX
 from diffsense.sensors import Radar
 from tests._toy_pipeline import toy_objective
 
@@ -69,6 +71,32 @@ def test_coverage_classes_of_hand_made_windows():
     np.testing.assert_array_equal(np.asarray(coverage_classes(windows)), [[1, 1, 0], [0, 1, 0], [1, 1, 1]])
     # The classes keep the window's dtype: a float32 run is not promoted to float64 (x64 is on).
     assert coverage_classes(windows.astype(jnp.float32)).dtype == jnp.float32
+
+
+def test_target_window_is_the_targets_history_oldest_first():
+    # p_detect[t, v] = 10 t + v: the windows of frames 3 and 5 over 2 frames of history.
+    p_detect = 10.0 * jnp.arange(6.0)[:, None] + jnp.arange(3.0)[None, :]
+    window = target_window(p_detect, jnp.array([3, 5]), 2)
+    expected = 10.0 * np.array([[1.0, 2.0, 3.0], [3.0, 4.0, 5.0]]) + TARGET_INDEX
+    np.testing.assert_array_equal(np.asarray(window), expected)
+
+
+def test_p_tracked_of_hand_made_windows():
+    # 1 - prod(1 - p) over each window: 1 - 0.5 * 0.5 * 1 and 1 - 0.9 * 0.8 * 0.7, per window.
+    windows = jnp.array([[0.5, 0.5, 0.0], [0.1, 0.2, 0.3]])
+    np.testing.assert_allclose(np.asarray(p_tracked(windows)), [0.75, 0.496], rtol=1e-12)
+    # The objective hands it every variant's windows at once, [N, I, W]: the product runs over W.
+    batched = jnp.stack([windows, windows[::-1]])
+    np.testing.assert_allclose(np.asarray(p_tracked(batched)), [[0.75, 0.496], [0.496, 0.75]], rtol=1e-12)
+
+
+def test_p_tracked_is_one_with_a_finite_gradient_when_a_detection_is_certain():
+    # log1p(-1) is -inf: the clip below 1 keeps the gradient finite, as the docstring promises.
+    windows = jnp.array([[1.0, 0.3, 0.0], [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(np.asarray(p_tracked(windows)), [1.0, 0.0], atol=1e-11)
+    grad = jax.grad(lambda w: jnp.sum(p_tracked(w)))(windows)
+    assert bool(jnp.all(jnp.isfinite(grad)))
+    np.testing.assert_allclose(np.asarray(grad[1]), [1.0, 1.0, 1.0])  # d/dp_j of 1 - prod(1 - p) at p = 0
 
 
 def test_objective_is_hashed_and_compared_by_identity():

@@ -28,9 +28,10 @@ def target_window(p_detect: Float[Array, "T V"], frames: Int[Array, " I"], histo
     return p_detect[window, TARGET_INDEX]
 
 
-def p_tracked(window_p: Float[Array, "I W"]) -> Float[Array, " I"]:
+def p_tracked(window_p: Float[Array, "*instants W"]) -> Float[Array, " *instants"]:
     """P(target detected at least once in the window) = 1 - prod(1 - p), in log space."""
-    log_miss = jnp.sum(jnp.log1p(-jnp.clip(window_p, 0.0, _P_MAX)), axis=-1)
+    # Only the top is clipped: a clip's bound passes half the gradient, and p = 0 is common.
+    log_miss = jnp.sum(jnp.log1p(-jnp.minimum(window_p, _P_MAX)), axis=-1)
     return -jnp.expm1(log_miss)
 
 
