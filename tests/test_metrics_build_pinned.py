@@ -13,9 +13,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from diffsense import config as cfg
+from diffsense import sensors as sensor
 from diffsense.metrics import EstimatorConfig, make_objective, recorded_scenes, speed_shifted_scenes, with_scenes
 from diffsense.predictors import CSLSTM_SPEC
 from diffsense.scene import TARGET_INDEX
+from diffsense.sensors._laws import RadarDetection
 from diffsense.tracks import prediction_frames
 from tests._recorded_files import write_highd
 from tests._synthetic import straight_scene
@@ -106,3 +109,20 @@ def test_float32_scenes_make_a_float32_objective():
     assert {leaf.dtype for leaf in jax.tree.leaves(E.weather)} == {jnp.dtype(jnp.float32)}
     # r given as Python floats is taken in the objective's dtype: E(r) stays float32
     assert E({"range_m": 40.0}).dtype == jnp.float32
+
+
+@pytest.mark.parametrize("kind", ["relaxed-reference", "straight-through"])
+def test_float32_objective_stays_float32_under_the_reference_draws(kind):
+    """The estimators that draw E_ref's own detections (a random detection law) keep float32
+    too: the relaxation's temperature and the hard draws are taken in the objective's dtype."""
+    jax.config.update("jax_enable_x64", True)
+    scenes, scenario = toy_scenes(1)
+    scenes = jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a,
+                          scenes)
+    radar = sensor.Radar(cfg.replace(sensor.load_config("radar"), detection=RadarDetection(law="swerling1")))
+    E = make_objective(scenes, scenario, prediction_frames(scenes.num_frames)[:1], radar,
+                       ToyPredictor(jnp.asarray(TOY_GAIN, jnp.float32)), names=("hfov_deg",),
+                       estimator=EstimatorConfig(kind=kind, reference_draws=2), shard=False)
+    # a float64 temperature (a solver's schedule under x64) is taken in float32 as well
+    value, grad = jax.value_and_grad(lambda h: E.e2({"hfov_deg": h}, jnp.float64(1.0)))(jnp.float32(10.0))
+    assert value.dtype == jnp.float32 and grad.dtype == jnp.float32
