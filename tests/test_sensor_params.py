@@ -12,6 +12,8 @@ import pytest
 from diffsense import sensors as sensor
 from diffsense.config import default_text
 from diffsense.errors import InputError
+from tests._synthetic import straight_scene
+from tests._toy_pipeline import ToySensor
 
 
 @pytest.mark.parametrize("name", sensor.SENSORS)
@@ -70,6 +72,15 @@ def test_unknown_parameter_sensor_mode_and_mismatch_are_refused():
         sensor.param_specs("lidar")
     with pytest.raises(InputError, match="do not match"):
         sensor.p_detect(None, radar.params, camera)
+
+
+def test_a_plugged_in_sensor_is_never_handed_an_unknown_mode():
+    # ToySensor reads any mode but "soft" as hard: the base class refuses the word first.
+    scene = straight_scene(s0_m=[0.0, 30.0], lane=[1, 1], speed_mps=[25.0, 25.0], num_frames=3)
+    for bad in ("SOFT", None, 1.0):
+        with pytest.raises(InputError, match="unknown detection mode"):
+            ToySensor().detect(scene, noise=jax.random.PRNGKey(0), mode=bad)
+    assert float(ToySensor().detect(scene, noise=jax.random.PRNGKey(0), mode="hard").p_detect[0, 1]) == 1.0
 
 
 def test_with_param_accepts_a_traced_value():

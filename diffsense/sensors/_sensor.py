@@ -20,7 +20,7 @@ from jaxtyping import ArrayLike, Float
 from diffsense.errors import InputError
 from diffsense.scene import Scene
 from diffsense.sensors._datatypes import Detections
-from diffsense.sensors._gates import Mode
+from diffsense.sensors._gates import Mode, check_mode
 from diffsense.sensors._measure import KeyOrNoise
 from diffsense.sensors._params import ParamSpec
 from diffsense.sensors._weather import CLEAR, Weather
@@ -77,7 +77,9 @@ class Sensor(eqx.Module):
             full[name] = value
         if noise is None:
             raise InputError("detect needs a noise key (or the noise draws)")
-        return self._detect(scene, full, noise, mode, temperature, weather)
+        # A plugged-in sensor's `_detect` sees only "soft" or "hard": one that tests
+        # `mode == "soft"` would otherwise read any other word as hard.
+        return self._detect(scene, full, noise, check_mode(mode), temperature, weather)
 
 
 def params_of(cls: type, r: Mapping[str, Any]) -> Any:
