@@ -225,8 +225,8 @@ def test_mc_draws_each_member_on_its_own():
     mc = _mc(6)
 
     @eqx.filter_jit
-    def by_hand(obj, values):
-        events = detection_events(obj, _r(values), "soft", 1.0)
+    def by_hand(obj, values, tau):
+        events = detection_events(obj, _r(values), "soft", tau)
         total = 0.0
         for k in range(6):
             us = events.uniforms(obj.data.noise_key, jnp.asarray(k), MC_STREAM)
@@ -234,10 +234,15 @@ def test_mc_draws_each_member_on_its_own():
             total = total + obj._question(obj._predict(det), p_tracked(obj._target_window(det)))
         return total / 6, us
 
-    expected, us = by_hand(mc, R_EDGE)
+    expected, us = by_hand(mc, R_EDGE, 1.0)
     assert len(us) == 2 and not np.allclose(np.asarray(us[0]), np.asarray(us[1]))  # independent members
     got = eqx.filter_jit(lambda o, v: o.e2(_r(v)))(mc, R_EDGE)
     np.testing.assert_allclose(float(got), float(expected), rtol=1e-9)
+    # the temperature multiplier reaches the members' gates (a warm one changes the draws' p)
+    warm, _ = by_hand(mc, R_EDGE, 20.0)
+    got = eqx.filter_jit(lambda o, v: o.e2(_r(v), 20.0))(mc, R_EDGE)
+    np.testing.assert_allclose(float(got), float(warm), rtol=1e-9)
+    assert abs(float(warm) - float(expected)) > 1e-6 * abs(float(expected))
 
 
 @pytest.mark.slow
