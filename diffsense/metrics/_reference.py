@@ -140,7 +140,10 @@ def summarise(draws: Float[Array, " K"]) -> ReferenceEvaluation:
     """Mean and standard error of the draws' hard objective [m^2], and E_ref [m] with its own."""
     k = draws.shape[0]
     e2 = jnp.mean(draws)
-    e2_se = jnp.std(draws, ddof=1) / jnp.sqrt(k) if k > 1 else jnp.zeros_like(e2)
+    # The variance under a safe sqrt: jnp.std's gradient is NaN when every draw is equal.
+    var_of_mean = jnp.sum((draws - e2) ** 2) / ((k - 1) * k) if k > 1 else jnp.zeros_like(e2)
+    spread = var_of_mean > 0
+    e2_se = jnp.where(spread, jnp.sqrt(jnp.where(spread, var_of_mean, 1.0)), 0.0)
     positive = e2 > 0
     e = jnp.where(positive, jnp.sqrt(jnp.where(positive, e2, 1.0)), 0.0)
     e_se = jnp.where(positive, e2_se / (2.0 * jnp.where(positive, e, 1.0)), 0.0)
