@@ -126,3 +126,18 @@ def test_float32_objective_stays_float32_under_the_reference_draws(kind):
     # a float64 temperature (a solver's schedule under x64) is taken in float32 as well
     value, grad = jax.value_and_grad(lambda h: E.e2({"hfov_deg": h}, jnp.float64(1.0)))(jnp.float32(10.0))
     assert value.dtype == jnp.float32 and grad.dtype == jnp.float32
+
+
+def test_float32_suite_objective_stays_float32_under_monte_carlo():
+    """A suite's Monte-Carlo draws take the temperature multiplier in the objective's dtype."""
+    jax.config.update("jax_enable_x64", True)
+    scenes, scenario = toy_scenes(1)
+    scenes = jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a,
+                          scenes)
+    radar = sensor.Radar(cfg.replace(sensor.load_config("radar"), detection=RadarDetection(law="swerling1")))
+    E = make_objective(scenes, scenario, prediction_frames(scenes.num_frames)[:1],
+                       sensor.Suite((radar, sensor.Camera.from_toml())),
+                       ToyPredictor(jnp.asarray(TOY_GAIN, jnp.float32)), names=("radar.hfov_deg",),
+                       estimator=EstimatorConfig(kind="mc", samples=2), shard=False)
+    value, grad = jax.value_and_grad(lambda h: E.e2({"radar.hfov_deg": h}, jnp.float64(1.0)))(jnp.float32(10.0))
+    assert value.dtype == jnp.float32 and grad.dtype == jnp.float32
