@@ -138,6 +138,29 @@ def test_triage_with_a_compile_cache_first_runs_every_planned_test_unmutated_wit
     assert "(a shared compilation cache)" in (tmp_path / "triage.md").read_text()
 
 
+def test_triage_resumes_from_an_interrupted_runs_log(tmp_path, monkeypatch):
+    triage = _triage_module()
+    (tmp_path / "mutants").mkdir()
+    names = ["m.x_f__mutmut_1", "m.x_f__mutmut_2", "m.x_f__mutmut_3"]
+    monkeypatch.setattr(triage, "_results", lambda w: {n: "not checked" for n in names})
+    monkeypatch.setattr(triage, "_diff", lambda w, n: "")
+    log = tmp_path / "old.err"
+    log.write_text("1/3 m.x_f__mutmut_2: killed\n2/3 m.x_f__mutmut_3: not killed within budget\n"
+                   "2/3 m.x_g__mutmut_9: killed\nTraceback (most recent call last):\n")
+    runs = []
+
+    def fake_run(cmd, cwd, env, capture_output, timeout):
+        runs.append(env.get("MUTANT_UNDER_TEST"))
+        return subprocess.CompletedProcess(cmd, 1 if "MUTANT_UNDER_TEST" in env else 0, b"", b"")
+
+    monkeypatch.setattr(triage.subprocess, "run", fake_run)
+    assert triage.main([str(tmp_path), "tests/test_x.py", "--resume", str(log)]) == 0
+    assert runs == [None, "m.x_f__mutmut_1"]  # the unmutated check, then only the unfinished one
+    report = (tmp_path / "triage.md").read_text()
+    assert "killed: 2, survived: 0, not killed within budget: 1" in report
+    assert "m.x_f__mutmut_3 (not killed within budget)" in report
+
+
 def test_triage_wants_focused_tests_or_reach_but_not_both(tmp_path, capsys):
     triage = _triage_module()
     assert triage.main([str(tmp_path)]) == 2

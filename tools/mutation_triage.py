@@ -27,6 +27,10 @@ instead of compiling: most of a mutant's time otherwise. The check that the test
 unmutated then runs every test the mutants will run, filling the cache; a test the warm cache
 broke would fail there, not pass as a kill. (The tests that count compilations set a cache
 folder of their own.)
+
+A triage prints each mutant's status as it finishes ("12/427 name: killed"); `--resume LOG`
+reads those lines from an interrupted run's stderr and triages only the mutants it had not
+finished (the report covers all of them; its minutes are the resumed run's).
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ from mutation import _diff, _results  # noqa: E402
 
 
 _CACHE_ENV: dict[str, str] = {}  # set once by --compile-cache, before any run
+_STATUSES = ("killed", "survived", "not killed within budget", "timeout", "no tests", "error")
 
 
 def _run_one(mutants: Path, name: str | None, tests: list[str], timeout_s: float) -> str:
@@ -143,6 +148,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="instead of focused tests: each mutant's reaching tests, fastest first")
     parser.add_argument("--compile-cache", type=Path, metavar="DIR",
                         help="share JAX's persistent compilation cache in DIR across the runs")
+    parser.add_argument("--resume", type=Path, metavar="LOG",
+                        help="take the statuses an interrupted triage printed (its stderr) as done")
     args = parser.parse_args(argv)
     _CACHE_ENV.clear()
     if (args.reach is None) == (not args.tests):
@@ -170,16 +177,26 @@ def main(argv: list[str] | None = None) -> int:
         if not _passes_unmutated(args, sorted({t for tests, _ in plans.values() for t in tests})):
             return 2
     start = time.monotonic()
-    status = {}
+    status = _resumed(args.resume, todo) if args.resume is not None else {}
     with concurrent.futures.ThreadPoolExecutor(args.jobs) as pool:
         futures = {pool.submit(_run_planned, args.workdir / "mutants", n, plans[n], args.timeout): n
-                   for n in todo}
+                   for n in todo if n not in status}
         for done in concurrent.futures.as_completed(futures):
             status[futures[done]] = done.result()
             print(f"{len(status)}/{len(todo)} {futures[done]}: {status[futures[done]]}",
                   file=sys.stderr, flush=True)
     _write_report(args, todo, status, (time.monotonic() - start) / 60)
     return 0
+
+
+def _resumed(log: Path, todo: list[str]) -> dict[str, str]:
+    """The statuses of `todo`'s mutants that an interrupted triage printed ("i/n name: status")."""
+    done = {}
+    for line in log.read_text().splitlines():
+        name, sep, status = line.partition(" ")[2].partition(": ")
+        if sep and name in todo and status in _STATUSES:
+            done[name] = status
+    return done
 
 
 def _passes_unmutated(args, tests: list[str]) -> bool:
@@ -198,8 +215,7 @@ def _write_report(args, todo: list[str], status: dict[str, str], minutes: float)
         tests += " (a shared compilation cache)"
     lines = [f"# Triage of {len(todo)} unchecked mutants{of} ({minutes:.1f} min)", "",
              "Tests: " + tests, "",
-             ", ".join(f"{k}: {counts[k]}" for k in ("killed", "survived", "not killed within budget",
-                                                      "timeout", "no tests", "error")),
+             ", ".join(f"{k}: {counts[k]}" for k in _STATUSES),
              "", "## Not killed", ""]
     for name in (n for n in todo if status[n] != "killed"):
         lines += [f"### {name} ({status[name]})", "", "```diff", _diff(args.workdir, name), "```", ""]
