@@ -67,7 +67,7 @@ class Sensor(eqx.Module):
         """The sensor looking at `scene` [T, V] with parameters r (defaults for those not given).
 
         `mode` "soft" gives detection probabilities differentiable in r; "hard" the 0/1
-        detections. `noise` is a PRNG key fixing the measurement-noise draws (common random
+        detections; any other is refused. `noise` is a PRNG key fixing the measurement-noise draws (common random
         numbers across r), or the draws themselves ([2, T, V] from `measurement_noise`).
         `weather` is the scene's (`Weather`; clear by default).
         """
