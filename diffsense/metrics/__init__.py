@@ -14,9 +14,9 @@ from diffsense.metrics._build import (
 from diffsense.metrics._estimators import ESTIMATORS, Estimator, EstimatorConfig, relaxed_bernoulli
 from diffsense.metrics._cost import cost_breakdown, load_costs, make_cost
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
-from diffsense.metrics._reference import ReferenceEvaluation, is_deterministic, reference_draw_margins
+from diffsense.metrics._reference import ReferenceEvaluation, is_deterministic, reference_draw_margins, safe_sqrt
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
-from diffsense.metrics._objective import QUESTIONS, Objective, safe_sqrt
+from diffsense.metrics._objective import QUESTIONS, Objective
 
 __all__ = [
     "COVERAGE_PARTS", "QUESTIONS", "cost_breakdown", "coverage_parts", "load_costs", "make_cost",

@@ -47,6 +47,7 @@ from diffsense.metrics._reference import (
     declares_random_law,
     detection_events,
     is_deterministic,
+    safe_sqrt,
     summarise,
 )
 from diffsense.metrics._sampling import estimator_samples
@@ -59,12 +60,6 @@ Mode = Literal["soft", "hard", "reference"]
 Question = Literal["eq12", "tracked"]
 QUESTIONS: tuple[str, ...] = ("eq12", "tracked")
 Params = Mapping[str, Any]
-
-
-def safe_sqrt(x: Array) -> Array:
-    """sqrt(x) for x >= 0 with a finite gradient at 0 (where sqrt's is infinite)."""
-    positive = x > 0
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
 
 
 def weighted_mean(per_variant: Float[Array, " N"], weight: Float[Array, " N"]) -> Float[Array, ""]:

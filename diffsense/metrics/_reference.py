@@ -136,16 +136,21 @@ def detection_events(objective: Any, r: Any, mode: str = "hard", tau: Any = 1.0)
                            lambda drawn: fuse_members(scenes, views, drawn)[0])
 
 
+def safe_sqrt(x: Array) -> Array:
+    """sqrt(x) for x >= 0 with a finite gradient at 0 (where sqrt's is infinite)."""
+    positive = x > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+
+
 def summarise(draws: Float[Array, " K"]) -> ReferenceEvaluation:
     """Mean and standard error of the draws' hard objective [m^2], and E_ref [m] with its own."""
     k = draws.shape[0]
     e2 = jnp.mean(draws)
     # The variance under a safe sqrt: jnp.std's gradient is NaN when every draw is equal.
     var_of_mean = jnp.sum((draws - e2) ** 2) / ((k - 1) * k) if k > 1 else jnp.zeros_like(e2)
-    spread = var_of_mean > 0
-    e2_se = jnp.where(spread, jnp.sqrt(jnp.where(spread, var_of_mean, 1.0)), 0.0)
+    e2_se = safe_sqrt(var_of_mean)
     positive = e2 > 0
-    e = jnp.where(positive, jnp.sqrt(jnp.where(positive, e2, 1.0)), 0.0)
+    e = safe_sqrt(e2)
     e_se = jnp.where(positive, e2_se / (2.0 * jnp.where(positive, e, 1.0)), 0.0)
     return ReferenceEvaluation(e2=e2, e2_se=e2_se, e=e, e_se=e_se, draws=draws)
 
