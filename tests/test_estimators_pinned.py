@@ -5,6 +5,7 @@ estimator against E_ref."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import equinox as eqx
@@ -89,7 +90,7 @@ def test_monte_carlo_value_written_out_sample_by_sample():
         for k in range(3):
             u = obj.data.mc_uniform[:, k]
             odds = ((1.0 - p) * (1.0 - u) / (p * u)) ** (1.0 / lam)
-            d = det.__class__(p_detect=1.0 / (1.0 + odds), x_m=det.x_m, y_m=det.y_m)
+            d = dataclasses.replace(det, p_detect=1.0 / (1.0 + odds))
             total = total + obj._question(obj._predict(d), p_tracked(obj._target_window(d)))
         return total / 3
 
