@@ -1,0 +1,75 @@
+"""`make_objective`'s refusals and defaults, each pinned by hand (surviving mutants of the
+mutation run of diffsense/metrics/_build.py, docs/mutation.md)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense.errors import InputError
+from diffsense.metrics import EstimatorConfig, make_objective
+from diffsense.sensors import Weather
+from diffsense.tracks import prediction_frames
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor, ToySensor, toy_scenes
+
+
+def _make(n: int = 2, **kwargs):
+    jax.config.update("jax_enable_x64", True)
+    scenes, scenario = toy_scenes(n)
+    frames = prediction_frames(scenes.num_frames)[:2]
+    kwargs.setdefault("names", ("range_m",))
+    return make_objective(scenes, scenario, frames, ToySensor(), ToyPredictor(jnp.asarray(TOY_GAIN)), **kwargs)
+
+
+def test_unknown_question_is_refused_by_name():
+    with pytest.raises(InputError, match=r"^unknown objective 'eq13' \(known: eq12, tracked\)$"):
+        _make(question="eq13")
+
+
+@pytest.mark.parametrize("penalty", [-1.0, -1e-12, float("nan"), float("inf")])
+def test_miss_penalty_must_be_finite_and_not_negative(penalty):
+    with pytest.raises(InputError, match=r"^miss_penalty_m2 must be a finite number >= 0, got "):
+        _make(question="tracked", miss_penalty_m2=penalty)
+
+
+def test_a_zero_miss_penalty_is_allowed_and_kept_as_a_float():
+    E = _make(question="tracked", miss_penalty_m2=0)
+    assert E.question == "tracked" and E.miss_penalty_m2 == 0.0 and isinstance(E.miss_penalty_m2, float)
+
+
+def test_an_unknown_free_parameter_is_refused():
+    with pytest.raises(InputError):
+        _make(names=("range_m", "hfov_deg"))
+
+
+def test_defaults_name_the_scenarios_by_index_and_fix_key_zero():
+    E = _make(n=3)  # toy scenarios 0, 1, 0
+    assert E.scenario_names == ("scenario0", "scenario1")
+    assert E.names == ("range_m",) and E.fill == "hold" and E.question == "eq12"
+    assert E.frames == tuple(int(f) for f in prediction_frames(101)[:2])
+    assert all(type(f) is int for f in E.frames)
+    same = _make(n=3, key=jax.random.PRNGKey(0))
+    other = _make(n=3, key=jax.random.PRNGKey(1))
+    keys = lambda o: np.asarray(jax.random.key_data(o.data.noise_key))  # noqa: E731
+    np.testing.assert_array_equal(keys(E), keys(same))
+    assert not np.array_equal(keys(E), keys(other))
+    assert len({tuple(k) for k in keys(E)}) == 3  # one key per variant
+
+
+def test_monte_carlo_uniforms_only_for_the_monte_carlo_estimator():
+    mc = _make(estimator=EstimatorConfig(kind="mc", samples=3))
+    u = np.asarray(mc.data.mc_uniform)
+    assert u.shape == (2, 3, 101, 4) and u.dtype == np.float64
+    assert 0.0 < u.min() and u.max() < 1.0 and not np.array_equal(u[0], u[1])  # per variant
+    assert np.asarray(_make().data.mc_uniform).shape == (2, 0, 101, 4)
+
+
+def test_scalar_weather_is_every_variants_in_the_scenes_dtype():
+    E = _make(n=3, weather=Weather(rain_mm_h=4.0, fog_visibility_m=300.0))
+    np.testing.assert_array_equal(np.asarray(E.weather.rain_mm_h), [4.0, 4.0, 4.0])
+    np.testing.assert_array_equal(np.asarray(E.weather.fog_visibility_m), [300.0] * 3)
+    assert E.weather.rain_mm_h.dtype == jnp.float64
+    np.testing.assert_array_equal(np.asarray(E.data.weight), [1.0, 1.0, 1.0])
+    np.testing.assert_array_equal(np.asarray(E.data.scenario), [0, 1, 0])
