@@ -72,9 +72,11 @@ def test_tracked_with_every_instant_seen_costs_no_penalty():
     assert float(value) == pytest.approx(SQ.sum() / 9.0, rel=1e-12)  # 8 instants + 1 pseudo-instant
 
 
-def test_hard_evaluation_against_a_loop_by_loop_recomputation():
-    """Every field of `hard` that reports an error, from the objective's own data with numpy."""
-    E = _objective("eq12")
+@pytest.mark.parametrize("weight", [(1.0, 1.0), (1.0, 0.0)])
+def test_hard_evaluation_against_a_loop_by_loop_recomputation(weight):
+    """Every field of `hard` that reports an error, from the objective's own data with numpy;
+    with variant 1 as padding (weight 0), E^2 is variant 0's alone."""
+    E = _objective("eq12", weight)
     h = jax.tree.map(np.asarray, E.hard({"range_m": 30.0}))
     det = E.detections({"range_m": 30.0}, "hard")
     pred = np.asarray(E._predict(det))
@@ -94,12 +96,14 @@ def test_hard_evaluation_against_a_loop_by_loop_recomputation():
     np.testing.assert_allclose(h.sq_instant, sq_instant, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(h.sq_true_gt, sq_true_gt, rtol=1e-12)
     np.testing.assert_allclose(h.sq_true_sensor, sq_true_sensor, rtol=1e-12)
-    np.testing.assert_allclose(h.e2, sq_instant.mean(), rtol=1e-10)
-    np.testing.assert_allclose(h.objective, sq_instant.mean(), rtol=1e-10)
+    e2 = sq_instant.mean() if weight[1] else sq_instant[0].mean()
+    assert abs(sq_instant[0].mean() - sq_instant.mean()) > 1e-3 * e2  # the weights matter
+    np.testing.assert_allclose(h.e2, e2, rtol=1e-10)
+    np.testing.assert_allclose(h.objective, e2, rtol=1e-10)
     # sq_error [N, F]: the mean over instants, step by step
     per_step = ((pred - gt) ** 2).sum(axis=-1).mean(axis=1)
     np.testing.assert_allclose(h.sq_error, per_step, rtol=1e-10, atol=1e-12)
-    assert float(E({"range_m": 30.0}, mode="hard")) == pytest.approx(np.sqrt(sq_instant.mean()), rel=1e-10)
+    assert float(E({"range_m": 30.0}, mode="hard")) == pytest.approx(np.sqrt(e2), rel=1e-10)
 
 
 def test_point_names_the_values_in_order():
@@ -177,3 +181,78 @@ def test_sensor_detections_are_the_sensors_own_in_the_mode_and_weather_asked():
         clear = wet.sensor.detect(scene, radar_r, wet.data.noise_key[n])
         np.testing.assert_allclose(p[n], np.asarray(in_rain.p_detect), rtol=1e-12, atol=1e-300)
         assert np.max(np.abs(np.asarray(clear.p_detect) - p[n])) > 1e-3
+
+
+@pytest.mark.parametrize("kind", ["relaxed-reference", "straight-through"])
+def test_sq_error_of_the_drawn_estimators_is_split_by_variant_and_step(kind):
+    """Under a random detection law the drawn estimators average each draw's [N, F] split over
+    the draws (axis 0), keeping the split: its weighted mean is E^2, and it still grows with the
+    horizon step and differs between the variants."""
+    from tests.test_reference import radar_objective
+
+    E = radar_objective(n=2, kind=kind, draws=3)
+    assert E.estimator_kind == kind
+    r = {"hfov_deg": 20.0}
+    sq = np.asarray(eqx.filter_jit(lambda o: o.sq_error(r))(E))
+    assert sq.shape == (2, 25)
+    assert float(np.mean(sq)) == pytest.approx(float(eqx.filter_jit(lambda o: o.e2(r))(E)), rel=1e-10)
+    assert np.all(sq[:, -1] > sq[:, 0]) and abs(sq[0, -1] - sq[1, -1]) > 1e-6 * sq[0, -1]
+
+
+def test_detections_default_to_hard_and_the_target_window_spans_the_history():
+    """`detections(r)` is the hard view; the target's window at an instant is its detections
+    over the predictor's 3-s history: 16 points, 2 frames apart at 10 Hz, so the 31 frames up
+    to and including the instant's."""
+    from diffsense.scene import TARGET_INDEX
+
+    E = _objective("eq12")
+    r = {"range_m": 30.0}
+    det = E.detections(r)
+    np.testing.assert_array_equal(np.asarray(det.p_detect), np.asarray(E.detections(r, "hard").p_detect))
+    p = np.asarray(E.detections(r, "soft").p_detect)  # distinct values frame by frame
+    window = np.asarray(E._target_window(E.detections(r, "soft")))
+    assert window.shape == (2, 4, 31)
+    for n in range(2):
+        for i, f in enumerate(E.frames):
+            np.testing.assert_array_equal(window[n, i], p[n, f - 30: f + 1, TARGET_INDEX])
+
+
+def test_hard_tracked_objective_counts_an_instant_seen_once_in_its_window():
+    """The hard "tracked" J at r: an instant is tracked if its target was detected at least
+    once in the history window (not only if detected throughout), recomputed from the hard
+    evaluation's own detections and per-instant errors."""
+    from diffsense.scene import TARGET_INDEX
+
+    E = _objective("tracked")
+    for range_m in (26.0, 30.0, 34.0):  # somewhere the target is seen only part of a window
+        h = jax.tree.map(np.asarray, E.hard({"range_m": range_m}))
+        seen_once = np.zeros((2, 4))
+        seen_throughout = np.zeros((2, 4))
+        for n in range(2):
+            for i, f in enumerate(E.frames):
+                window = h.p_detect[n, f - 30: f + 1, TARGET_INDEX]
+                seen_once[n, i], seen_throughout[n, i] = window.max(), window.min()
+        if np.array_equal(seen_once, seen_throughout):
+            continue
+        q = seen_once
+        expected = (q * h.sq_instant).sum() / (1.0 + q.sum()) + PENALTY_M2 * (1.0 - q.mean())
+        assert float(h.objective) == pytest.approx(expected, rel=1e-12)
+        return
+    pytest.fail("no range tried sees the target only part of a window")
+
+
+def test_hard_detection_at_an_even_chance_is_a_detection():
+    """The hard view decides each detection by its probability's median, p >= 1/2: a plug-in
+    sensor that detects every car with probability exactly 1/2 detects them all."""
+    from diffsense.sensors._datatypes import Detections
+    from tests._toy_pipeline import ToySensor
+
+    class CoinSensor(ToySensor):
+        def _detect(self, scene, r, noise, mode, temperature, weather):
+            det = super()._detect(scene, r, noise, mode, temperature, weather)
+            p = jnp.full_like(det.p_detect, 0.5).at[..., 0].set(1.0)
+            return Detections(p_detect=p, x_m=det.x_m, y_m=det.y_m)
+
+    E = _objective("eq12")
+    coin = eqx.tree_at(lambda o: o.sensor, E, CoinSensor())
+    assert np.all(np.asarray(coin.detections({"range_m": 30.0}, "hard").p_detect) == 1.0)
