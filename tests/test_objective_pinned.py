@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from diffsense.metrics import EstimatorConfig
 from tests._toy_pipeline import toy_objective
 
 # The offset [m] of instant i of variant n (x for variant 0, y for variant 1, so a mix-up of the
@@ -104,6 +105,12 @@ def test_hard_evaluation_against_a_loop_by_loop_recomputation(weight):
     per_step = ((pred - gt) ** 2).sum(axis=-1).mean(axis=1)
     np.testing.assert_allclose(h.sq_error, per_step, rtol=1e-10, atol=1e-12)
     assert float(E({"range_m": 30.0}, mode="hard")) == pytest.approx(np.sqrt(e2), rel=1e-10)
+    # RMSE against the true future per scenario (toy variants: scenarios 0 and 1), over its
+    # real variants only: a scenario whose one variant is padding reports 0, not NaN.
+    assert list(np.asarray(E.data.scenario)) == [0, 1]
+    for sq_true, rmse in ((sq_true_gt, h.rmse_gt), (sq_true_sensor, h.rmse_sensor)):
+        np.testing.assert_allclose(rmse[0], np.sqrt(sq_true[0].mean(axis=0)), rtol=1e-12)
+        np.testing.assert_allclose(rmse[1], np.sqrt(sq_true[1].mean(axis=0)) * weight[1], rtol=1e-12)
 
 
 def test_point_names_the_values_in_order():
@@ -256,3 +263,54 @@ def test_hard_detection_at_an_even_chance_is_a_detection():
     E = _objective("eq12")
     coin = eqx.tree_at(lambda o: o.sensor, E, CoinSensor())
     assert np.all(np.asarray(coin.detections({"range_m": 30.0}, "hard").p_detect) == 1.0)
+
+
+def _float32(scenes):
+    return jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a, scenes)
+
+
+def test_float32_objective_stays_float32_in_hard_mode_and_under_float64_weather():
+    """With x64 on, a float32 objective's hard detections and hard E stay float32, and so does
+    its value when its weather is moved by a float64 amount (as the ODD sensitivity moves it):
+    the sensor sees the weather in the objective's dtype."""
+    from diffsense import config as cfg
+    from diffsense import sensors as sensor
+    from diffsense.metrics import make_objective
+    from diffsense.sensors._laws import RadarDetection
+    from diffsense.tracks import prediction_frames
+    from tests._toy_pipeline import TOY_GAIN, ToyPredictor, ToySensor, toy_scenes
+
+    jax.config.update("jax_enable_x64", True)
+    scenes, scenario = toy_scenes(1)
+    scenes = _float32(scenes)
+    predictor = ToyPredictor(jnp.asarray(TOY_GAIN, jnp.float32))
+    frames = prediction_frames(scenes.num_frames)[:1]
+    toy = make_objective(scenes, scenario, frames, ToySensor(), predictor, names=("range_m",))
+    assert toy.detections({"range_m": 30.0}).p_detect.dtype == jnp.float32
+    assert toy({"range_m": 30.0}, mode="hard").dtype == jnp.float32
+
+    radar = sensor.Radar(cfg.replace(sensor.load_config("radar"), detection=RadarDetection(law="swerling1")))
+    E = make_objective(scenes, scenario, frames, radar, predictor, names=("hfov_deg",),
+                       estimator=EstimatorConfig(kind="mean-field"), shard=False)
+
+    def wetter(shift_mm_h):
+        moved = eqx.tree_at(lambda o: o.weather.rain_mm_h, E, E.weather.rain_mm_h + shift_mm_h)
+        return moved.e2({"hfov_deg": 20.0})
+
+    value, grad = jax.value_and_grad(wetter)(jnp.float64(5.0))
+    assert value.dtype == jnp.float32
+    assert np.isfinite(float(grad)) and float(grad) != 0.0  # the rain reaches the radar
+
+    # A plug-in sensor that reads the rain rate as it is (the shipped ones cast it themselves)
+    # is handed it in the objective's dtype.
+    seen = []
+
+    class RainyToy(ToySensor):
+        def _detect(self, scene, r, noise, mode, temperature, weather):
+            seen.append(jnp.asarray(weather.rain_mm_h).dtype)
+            return super()._detect(scene, r, noise, mode, temperature, weather)
+
+    rainy = eqx.tree_at(lambda o: (o.sensor, o.weather.rain_mm_h), toy,
+                        (RainyToy(), jnp.asarray(toy.weather.rain_mm_h, jnp.float64) + 1.0))
+    rainy.e2({"range_m": 30.0})
+    assert seen == [jnp.dtype(jnp.float32)]
