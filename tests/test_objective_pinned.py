@@ -1,6 +1,6 @@
 """The objective's questions and its hard evaluation, pinned to hand-made predictions and
 numpy recomputations written loop by loop (surviving mutants of the mutation run of
-diffsense/metrics/_objective.py, docs/mutation.md).
+diffsense/metrics/_objective.py and one of _build.py, docs/mutation.md).
 
 Two toy variants of four instants each; a prediction offset from the ground-truth-input
 prediction by a hand-chosen distance on the first five of its 25 horizon steps, so each
@@ -136,7 +136,7 @@ def test_predictions_use_the_predictors_own_input_spec():
 
     from diffsense.metrics import make_objective
     from diffsense.predictors import CSLSTM_SPEC
-    from diffsense.tracks import build_inputs, flatten_instants, prediction_frames
+    from diffsense.tracks import build_inputs, flatten_instants, ground_truth_detections, prediction_frames
     from tests._toy_pipeline import ToyPredictor, ToySensor, toy_scenes
 
     jax.config.update("jax_enable_x64", True)
@@ -147,14 +147,20 @@ def test_predictions_use_the_predictors_own_input_spec():
     E = make_objective(scenes, scenario, frames, ToySensor(), predictor, names=("range_m",))
     det = E.detections({"range_m": 1000.0}, "hard")
 
-    def by_hand(s):
-        inputs = [build_inputs(jax.tree.map(lambda a: a[n], scenes), jax.tree.map(lambda a: a[n], det),
-                               jnp.asarray(frames), "hold", s) for n in range(2)]
-        return np.stack([np.asarray(predictor(flatten_instants(jax.tree.map(lambda a: a[None], x))))
-                         for x in inputs])
+    def by_hand(s, truth=False):
+        def one(n):
+            scene = jax.tree.map(lambda a: a[n], scenes)
+            seen = ground_truth_detections(scene) if truth else jax.tree.map(lambda a: a[n], det)
+            return build_inputs(scene, seen, jnp.asarray(frames), "hold", s)
+
+        return np.stack([np.asarray(predictor(flatten_instants(jax.tree.map(lambda a: a[None], one(n)))))
+                         for n in range(2)])
 
     np.testing.assert_allclose(np.asarray(E._predict(det)), by_hand(spec), rtol=1e-12)
     assert not np.allclose(by_hand(spec), by_hand(CSLSTM_SPEC))  # the grid's length matters
+    # the ground-truth-input predictions, made once when E is built, to the same spec
+    np.testing.assert_allclose(np.asarray(E.data.gt_pred), by_hand(spec, truth=True), rtol=1e-12)
+    assert not np.allclose(by_hand(spec, truth=True), by_hand(CSLSTM_SPEC, truth=True))
 
 
 def test_sensor_detections_are_the_sensors_own_in_the_mode_and_weather_asked():
