@@ -73,3 +73,28 @@ def test_scalar_weather_is_every_variants_in_the_scenes_dtype():
     assert E.weather.rain_mm_h.dtype == jnp.float64
     np.testing.assert_array_equal(np.asarray(E.data.weight), [1.0, 1.0, 1.0])
     np.testing.assert_array_equal(np.asarray(E.data.scenario), [0, 1, 0])
+
+
+def test_padding_by_one_slot_adds_a_background_car_and_keeps_the_frame_period():
+    """Pooling pads with the scene package's absent vehicles: present False, a car in the
+    background role, the ego's size, 1 km behind the ego; the scene's frame period is kept
+    (a 25 Hz recording stays 25 Hz)."""
+    import dataclasses
+
+    from diffsense.metrics._build import _pad_vehicles
+    from diffsense.scene import BACKGROUND, CAR
+    from tests._synthetic import straight_scene
+
+    jax.config.update("jax_enable_x64", True)
+    scene = straight_scene(s0_m=[0.0, 20.0, 40.0], lane=[1, 1, 2], speed_mps=[25.0, 24.0, 26.0], num_frames=5,
+                           dt_s=0.04)
+    scene = dataclasses.replace(scene, length_m=jnp.asarray([5.0, 4.5, 4.0]), kind=jnp.asarray([2, 0, 1]),
+                                role=jnp.asarray([0, 1, 2]))
+    padded = _pad_vehicles(scene, 4)
+    assert padded.num_vehicles == 4 and padded.dt_s == 0.04
+    assert np.asarray(padded.present).tolist() == [True, True, True, False]
+    assert int(padded.role[3]) == BACKGROUND and int(padded.kind[3]) == CAR
+    assert float(padded.length_m[3]) == 5.0  # the ego's
+    np.testing.assert_allclose(np.asarray(padded.s_m[:, 3]), 25.0 * 0.04 * np.arange(5) - 1000.0, atol=1e-9)
+    np.testing.assert_array_equal(np.asarray(padded.kind[:3]), [2, 0, 1])
+    assert _pad_vehicles(scene, 3) is scene

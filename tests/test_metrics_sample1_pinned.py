@@ -2,8 +2,8 @@
 pinned to a value worked by hand.
 
 - Padding a batch's vehicle axis adds absent cars: present False, 1 km behind the ego at every
-  frame, and a car's size (4.5 m x 1.8 m, not 0 x 0, so no geometric test divides by a zero
-  size); the real vehicles are unchanged.
+  frame, and the ego's size (here 4.5 m x 1.8 m, not 0 x 0, so no geometric test divides by a
+  zero size); the real vehicles are unchanged.
 - Simulated scenes: the weather of each variant is its scenario TOML's (a copy of sc01 with
   2 mm/h of rain and 300 m of fog, beside sc01 itself: clear, rain 0 and visibility infinite),
   and `background_vehicles` sets every scenario's background count (sc01 ships 0).
@@ -45,7 +45,7 @@ def test_padding_adds_absent_cars_far_behind_the_ego():
     for v in (3, 4):
         np.testing.assert_allclose(s[:, v], ego_s - 1000.0, atol=1e-9)
         np.testing.assert_allclose(x[:, v], ego_s - 1000.0, atol=1e-9)  # the road runs along +x from 0
-    np.testing.assert_array_equal(np.asarray(padded.length_m)[3:], 4.5)
+    np.testing.assert_array_equal(np.asarray(padded.length_m)[3:], 4.5)  # the ego's size
     np.testing.assert_array_equal(np.asarray(padded.width_m)[3:], 1.8)
     np.testing.assert_array_equal(s[:, :3], np.asarray(scene.s_m))
     np.testing.assert_array_equal(np.asarray(padded.speed_mps)[:, :3], np.asarray(scene.speed_mps))

@@ -41,25 +41,15 @@ def relevance_reach(spec: InputSpec, sensors: Sequence[Sensor]) -> dict[str, flo
 
 
 def _pad_vehicles(scene: Scene, width: int) -> Scene:
-    """Pad the vehicle axis [N, T, V] to `width` with absent vehicles (present False)."""
+    """Pad the vehicle axis [N, T, V] to `width` with absent vehicles: those `select_vehicles`
+    adds (present False, role BACKGROUND, 1 km behind the ego), so padding means one thing."""
     extra = width - scene.num_vehicles
     if extra == 0:
         return scene
-
-    def pad(a, fill):
-        widths = [(0, 0)] * (a.ndim - 1) + [(0, extra)]
-        return jnp.pad(a, widths, constant_values=fill)
-
-    # Absent vehicles sit 1 km behind the ego so no geometric test ever sees them.
-    far = scene.s_m[..., :1] - 1000.0
-    fields = {f.name: getattr(scene, f.name) for f in dataclasses.fields(scene) if f.name != "dt_s"}
-    out = {k: pad(v, 0) for k, v in fields.items()}
-    out["present"] = pad(scene.present, False)
-    for name in ("s_m", "x_m"):
-        out[name] = jnp.concatenate([fields[name], jnp.broadcast_to(far, far.shape[:-1] + (extra,))], axis=-1)
-    out["length_m"] = pad(scene.length_m, 4.5)
-    out["width_m"] = pad(scene.width_m, 1.8)
-    return Scene(**out, dt_s=scene.dt_s)
+    slots = np.arange(width)
+    batch = scene.s_m.shape[:-2]
+    order = np.broadcast_to(np.where(slots < scene.num_vehicles, slots, 0), batch + (width,))
+    return select_vehicles(scene, order, np.broadcast_to(slots < scene.num_vehicles, batch + (width,)))
 
 
 def _scenario(name: str, background_vehicles: int) -> ScenarioConfig:
