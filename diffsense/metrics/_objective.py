@@ -162,7 +162,7 @@ class Objective(eqx.Module):
         weather = jax.tree.map(lambda v: jnp.asarray(v).astype(self.dtype), self.weather)
         return jax.vmap(lambda s, k, w: look(s, params, k, w))(self.data.scenes, self.data.noise_key, weather)
 
-    def _sensor_detections(self, r: Params, mode: Mode, tau: float | Array) -> Detections:
+    def _sensor_detections(self, r: Params, mode: Mode, tau: float | Array = 1.0) -> Detections:
         tau = jnp.asarray(tau).astype(self.dtype)
         return self._per_variant(r, lambda s, p, k, w: self.sensor.detect(s, p, k, mode=mode, temperature=tau, weather=w))
 
