@@ -98,3 +98,34 @@ def test_padding_by_one_slot_adds_a_background_car_and_keeps_the_frame_period():
     np.testing.assert_allclose(np.asarray(padded.s_m[:, 3]), 25.0 * 0.04 * np.arange(5) - 1000.0, atol=1e-9)
     np.testing.assert_array_equal(np.asarray(padded.kind[:3]), [2, 0, 1])
     assert _pad_vehicles(scene, 3) is scene
+
+
+SHARDED = """
+import json, jax
+jax.config.update("jax_enable_x64", True)
+from tests._toy_pipeline import toy_objective
+E = toy_objective(n=3, instants=2)
+print(json.dumps({"weight": E.data.weight.tolist(), "rain": E.weather.rain_mm_h.shape[0],
+                  "devices": len(E.data.weight.sharding.device_set),
+                  "E": float(E({"range_m": 30.0}, mode="hard"))}))
+"""
+
+
+def test_variants_are_sharded_by_default_over_four_devices():
+    """On 4 simulated CPU devices `make_objective` shards by default: 3 variants padded to 4 at
+    weight 0, the weather too, and the hard E the same as on one device."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    one = _make(n=3)  # also here, so the mutation run sees this test reach make_objective
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run([sys.executable, "-c", SHARDED], cwd=root, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["weight"] == [1.0, 1.0, 1.0, 0.0] and out["rain"] == 4 and out["devices"] == 4
+    assert out["E"] == pytest.approx(float(one({"range_m": 30.0}, mode="hard")), rel=1e-12)
