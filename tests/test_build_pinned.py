@@ -35,6 +35,7 @@ def test_miss_penalty_must_be_finite_and_not_negative(penalty):
 
 
 def test_a_zero_miss_penalty_is_allowed_and_kept_as_a_float():
+    assert _make(question="tracked").miss_penalty_m2 == 100.0  # the default: a 10 m RMS error
     E = _make(question="tracked", miss_penalty_m2=0)
     assert E.question == "tracked" and E.miss_penalty_m2 == 0.0 and isinstance(E.miss_penalty_m2, float)
 
@@ -59,9 +60,9 @@ def test_defaults_name_the_scenarios_by_index_and_fix_key_zero():
 
 
 def test_monte_carlo_uniforms_only_for_the_monte_carlo_estimator():
-    mc = _make(estimator=EstimatorConfig(kind="mc", samples=3))
+    mc = _make(n=3, estimator=EstimatorConfig(kind="mc", samples=3))
     u = np.asarray(mc.data.mc_uniform)
-    assert u.shape == (2, 3, 101, 4) and u.dtype == np.float64
+    assert u.shape == (3, 3, 101, 4) and u.dtype == np.float64
     assert 0.0 < u.min() and u.max() < 1.0 and not np.array_equal(u[0], u[1])  # per variant
     assert np.asarray(_make().data.mc_uniform).shape == (2, 0, 101, 4)
 
@@ -129,3 +130,15 @@ def test_variants_are_sharded_by_default_over_four_devices():
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert out["weight"] == [1.0, 1.0, 1.0, 0.0] and out["rain"] == 4 and out["devices"] == 4
     assert out["E"] == pytest.approx(float(one({"range_m": 30.0}, mode="hard")), rel=1e-12)
+
+
+def test_recorded_scenes_come_in_the_dtype_asked(tmp_path):
+    from diffsense.metrics import recorded_scenes
+    from diffsense.predictors import CSLSTM_SPEC
+    from tests._recorded_files import write_highd
+
+    jax.config.update("jax_enable_x64", True)
+    scenes, index, names, _ = recorded_scenes(f"highd:{write_highd(tmp_path)}", spec=CSLSTM_SPEC,
+                                              sensors=(ToySensor(),), dtype=jnp.float32)
+    assert scenes.x_m.dtype == jnp.float32 and scenes.s_m.dtype == jnp.float32
+    assert scenes.x_m.shape[0] == len(names) == len(index)

@@ -142,8 +142,8 @@ def recorded_scenes(
         frames = prediction_frames(scene.num_frames, stride_frames, spec, scene.dt_s)
         kept.append(relevant_vehicles(scene, frames, **relevance_reach(spec, sensors)))
     width = max(s.num_vehicles for s in kept)
-    batch = jax.tree.map(lambda *a: jnp.stack(a), *[_pad_vehicles(jax.tree.map(lambda a: a[None], s), width) for s in kept])
-    batch = jax.tree.map(lambda a: a[:, 0], batch)
+    batch = jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(jax.tree.map(lambda a: a[None], s), width)
+                                                           for s in kept])
     stem = Path(source.partition(":")[2]).name
     n = len(kept)
     return (batch, np.arange(n), tuple(f"{stem}#{i}" for i in range(n)),
