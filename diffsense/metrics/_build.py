@@ -8,7 +8,6 @@ the sensors (sized by the sensors' mountings). Ground-truth predictions are made
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
