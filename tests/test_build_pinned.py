@@ -3,6 +3,12 @@ mutation run of diffsense/metrics/_build.py, docs/mutation.md)."""
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -79,7 +85,7 @@ def test_scalar_weather_is_every_variants_in_the_scenes_dtype():
 def test_padding_by_one_slot_adds_a_background_car_and_keeps_the_frame_period():
     """Pooling pads with the scene package's absent vehicles: present False, a car in the
     background role, the ego's size, 1 km behind the ego; the scene's frame period is kept
-    (a 25 Hz recording stays 25 Hz)."""
+    (0.04 s here, not the 0.1 s default)."""
     import dataclasses
 
     from diffsense.metrics._build import _pad_vehicles
@@ -115,12 +121,6 @@ print(json.dumps({"weight": E.data.weight.tolist(), "rain": E.weather.rain_mm_h.
 def test_variants_are_sharded_by_default_over_four_devices():
     """On 4 simulated CPU devices `make_objective` shards by default: 3 variants padded to 4 at
     weight 0, the weather too, and the hard E the same as on one device."""
-    import json
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
     one = _make(n=3)  # also here, so the mutation run sees this test reach make_objective
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     root = Path(__file__).resolve().parents[1]
