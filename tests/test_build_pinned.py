@@ -142,3 +142,71 @@ def test_recorded_scenes_come_in_the_dtype_asked(tmp_path):
                                               sensors=(ToySensor(),), dtype=jnp.float32)
     assert scenes.x_m.dtype == jnp.float32 and scenes.s_m.dtype == jnp.float32
     assert scenes.x_m.shape[0] == len(names) == len(index)
+
+
+def _same_scenes(a, b):
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
+        assert x.dtype == y.dtype
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def test_simulate_scenes_forwards_every_setting_and_shares_the_defaults(tmp_path, monkeypatch):
+    """`simulate_scenes` is `speed_shifted_scenes(...).base`: every setting forwarded (each away
+    from its default here), and both default to stride 4, the scenario's own background, float64
+    and no speed offset. The background is moved to 10 m behind the ego, where it is kept."""
+    from diffsense.metrics import _build, simulate_scenes, speed_shifted_scenes
+    from diffsense.predictors import CSLSTM_SPEC
+
+    jax.config.update("jax_enable_x64", True)
+    shipped = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "sc01.toml"
+    near = tmp_path / "sc01_near.toml"
+    near.write_text(shipped.read_text().replace('name = "sc01"', 'name = "sc01_near"')
+                    .replace("gap_m = 150.0", "gap_m = 10.0"))
+    strides, select = [], _build.relevant_selection
+
+    def spy(scene, frames, **reach):
+        strides.append(set(np.diff(np.asarray(frames)).tolist()))
+        return select(scene, frames, **reach)
+
+    monkeypatch.setattr(_build, "relevant_selection", spy)
+    reach = dict(spec=CSLSTM_SPEC, sensors=(ToySensor(),))
+    key = jax.random.key(3)
+    asked = dict(stride_frames=40, background_vehicles=6, dtype=jnp.float32, speed_offset_kmh=6.0)
+    scenes, index, names, weather = simulate_scenes((str(near),), 1, key, **reach, **asked)
+    shifted, index2, names2, weather2 = speed_shifted_scenes((str(near),), 1, key, **reach, **asked)
+    _same_scenes(scenes, shifted.base)
+    assert strides == [{40}, {40}]
+    assert scenes.s_m.dtype == jnp.float32 and scenes.num_vehicles == 8  # 3 of the 6 background cars kept
+    assert names == names2 == ("sc01_near",) and list(index) == list(index2) == [0]
+    _same_scenes(weather, weather2)
+    # the speed offset is in the scenes: the ego drives 6 km/h faster than at no offset
+    plain, _, _, _ = simulate_scenes((str(near),), 1, key, **reach, stride_frames=40, background_vehicles=6,
+                                     dtype=jnp.float32)
+    np.testing.assert_allclose(np.asarray(scenes.speed_mps)[0, 0, 0] - np.asarray(plain.speed_mps)[0, 0, 0],
+                               6.0 / 3.6, rtol=1e-5)
+
+    strides.clear()
+    default, _, _, _ = simulate_scenes((str(near),), 1, key, **reach)
+    explicit, _, _, _ = speed_shifted_scenes((str(near),), 1, key, **reach, stride_frames=4,
+                                             background_vehicles=0, dtype=jnp.float64, speed_offset_kmh=0.0)
+    _same_scenes(default, explicit.base)
+    assert default.num_vehicles == 5  # the scenario's own background: none
+    own, _, _, _ = speed_shifted_scenes((str(near),), 1, key, **reach)
+    assert strides == [{4}, {4}, {4}]
+    assert own.base_offset_kmh == 0.0 and own.dtype == jnp.float64 and own.configs == explicit.configs
+    _same_scenes(own.base, explicit.base)
+
+
+def test_recorded_scenes_are_named_after_the_whole_file_name(tmp_path):
+    """The recording's file name is kept whole, a colon in it too, and each cut's weather is
+    clear with one value per cut."""
+    from diffsense.metrics import recorded_scenes
+    from diffsense.predictors import CSLSTM_SPEC
+    from tests._recorded_files import write_highd
+
+    jax.config.update("jax_enable_x64", True)
+    path = write_highd(tmp_path, stem="a:01")
+    scenes, _, names, weather = recorded_scenes(f"highd:{path}", spec=CSLSTM_SPEC, sensors=(ToySensor(),))
+    n = scenes.x_m.shape[0]
+    assert names[0] == f"{path.name}#0" and path.name.startswith("a:01")
+    assert np.shape(weather.rain_mm_h) == np.shape(weather.fog_visibility_m) == (n,)
