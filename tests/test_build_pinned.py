@@ -175,7 +175,10 @@ def test_simulate_scenes_forwards_every_setting_and_shares_the_defaults(tmp_path
     scenes, index, names, weather = simulate_scenes((str(near),), 1, key, **reach, **asked)
     shifted, index2, names2, weather2 = speed_shifted_scenes((str(near),), 1, key, **reach, **asked)
     _same_scenes(scenes, shifted.base)
-    assert strides == [{40}, {40}]
+    _same_scenes(shifted(0.0), shifted.base)  # re-simulated in the dtype asked
+    slower, _, _, _ = simulate_scenes((str(near),), 1, key, **reach, **dict(asked, speed_offset_kmh=4.0))
+    _same_scenes(shifted(-2.0), slower)  # offsets add to the base's 6 km/h
+    assert strides == [{40}] * 3
     assert scenes.s_m.dtype == jnp.float32 and scenes.num_vehicles == 8  # 3 of the 6 background cars kept
     assert names == names2 == ("sc01_near",) and list(index) == list(index2) == [0]
     _same_scenes(weather, weather2)
@@ -190,7 +193,7 @@ def test_simulate_scenes_forwards_every_setting_and_shares_the_defaults(tmp_path
     explicit, _, _, _ = speed_shifted_scenes((str(near),), 1, key, **reach, stride_frames=4,
                                              background_vehicles=0, dtype=jnp.float64, speed_offset_kmh=0.0)
     _same_scenes(default, explicit.base)
-    assert default.num_vehicles == 5  # the scenario's own background: none
+    assert default.s_m.dtype == jnp.float64 and default.num_vehicles == 5  # the scenario's own background: none
     own, _, _, _ = speed_shifted_scenes((str(near),), 1, key, **reach)
     assert strides == [{4}, {4}, {4}]
     assert own.base_offset_kmh == 0.0 and own.dtype == jnp.float64 and own.configs == explicit.configs
@@ -210,3 +213,28 @@ def test_recorded_scenes_are_named_after_the_whole_file_name(tmp_path):
     n = scenes.x_m.shape[0]
     assert names[0] == f"{path.name}#0" and path.name.startswith("a:01")
     assert np.shape(weather.rain_mm_h) == np.shape(weather.fog_visibility_m) == (n,)
+
+
+def test_with_scenes_pads_one_scene_by_repeating_it_and_keeps_a_float32_objective():
+    """One new scene for an objective of three rows (two of them padding, as sharding adds)
+    fills all three; a float32 objective's ground truth stays float32 with x64 on."""
+    from diffsense.metrics import with_scenes
+    from diffsense.tracks import prediction_frames as frames_of
+
+    jax.config.update("jax_enable_x64", True)
+    E = _make(n=3)
+    one = jax.tree.map(lambda a: a[1:2], E.data.scenes)
+    moved = with_scenes(E, one)
+    s = np.asarray(moved.data.scenes.s_m)
+    assert s.shape[0] == 3
+    for row in range(3):
+        np.testing.assert_array_equal(s[row], np.asarray(one.s_m)[0])
+        np.testing.assert_array_equal(np.asarray(moved.data.true_fut)[row], np.asarray(E.data.true_fut)[1])
+
+    scenes, scenario = toy_scenes(2)
+    scenes = jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a, scenes)
+    E32 = make_objective(scenes, scenario, frames_of(scenes.num_frames)[:1], ToySensor(),
+                         ToyPredictor(jnp.asarray(TOY_GAIN)), names=("range_m",))
+    moved32 = with_scenes(E32, scenes)
+    assert moved32.data.gt_pred.dtype == moved32.data.true_fut.dtype == jnp.float32
+    np.testing.assert_array_equal(np.asarray(moved32.data.true_fut), np.asarray(E32.data.true_fut))
