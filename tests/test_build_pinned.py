@@ -1,5 +1,6 @@
-"""`make_objective`'s refusals and defaults, each pinned by hand (surviving mutants of the
-mutation run of diffsense/metrics/_build.py, docs/mutation.md)."""
+"""`diffsense/metrics/_build.py` pinned by hand: `make_objective`'s refusals and defaults, the
+settings the scene builders forward, padding, and dtypes (each test written for surviving
+mutants of its mutation run, docs/mutation.md)."""
 
 from __future__ import annotations
 
@@ -219,7 +220,6 @@ def test_with_scenes_pads_one_scene_by_repeating_it_and_keeps_a_float32_objectiv
     """One new scene for an objective of three rows (two of them padding, as sharding adds)
     fills all three; a float32 objective's ground truth stays float32 with x64 on."""
     from diffsense.metrics import with_scenes
-    from diffsense.tracks import prediction_frames as frames_of
 
     jax.config.update("jax_enable_x64", True)
     E = _make(n=3)
@@ -233,7 +233,7 @@ def test_with_scenes_pads_one_scene_by_repeating_it_and_keeps_a_float32_objectiv
 
     scenes, scenario = toy_scenes(2)
     scenes = jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a, scenes)
-    E32 = make_objective(scenes, scenario, frames_of(scenes.num_frames)[:1], ToySensor(),
+    E32 = make_objective(scenes, scenario, prediction_frames(scenes.num_frames)[:1], ToySensor(),
                          ToyPredictor(jnp.asarray(TOY_GAIN)), names=("range_m",))
     moved32 = with_scenes(E32, scenes)
     assert moved32.data.gt_pred.dtype == moved32.data.true_fut.dtype == jnp.float32
