@@ -46,9 +46,9 @@ def _pad_vehicles(scene: Scene, width: int) -> Scene:
     if extra == 0:
         return scene
     slots = np.arange(width)
-    batch = scene.s_m.shape[:-2]
-    order = np.broadcast_to(np.where(slots < scene.num_vehicles, slots, 0), batch + (width,))
-    return select_vehicles(scene, order, np.broadcast_to(slots < scene.num_vehicles, batch + (width,)))
+    real = slots < scene.num_vehicles
+    shape = scene.s_m.shape[:-2] + (width,)
+    return select_vehicles(scene, np.broadcast_to(np.where(real, slots, 0), shape), np.broadcast_to(real, shape))
 
 
 def _scenario(name: str, background_vehicles: int) -> ScenarioConfig:
@@ -141,8 +141,7 @@ def recorded_scenes(
         frames = prediction_frames(scene.num_frames, stride_frames, spec, scene.dt_s)
         kept.append(relevant_vehicles(scene, frames, **relevance_reach(spec, sensors)))
     width = max(s.num_vehicles for s in kept)
-    batch = jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(jax.tree.map(lambda a: a[None], s), width)
-                                                           for s in kept])
+    batch = _concat_padded(tuple(jax.tree.map(lambda a: a[None], s) for s in kept), width)
     stem = Path(source.partition(":")[2]).name
     n = len(kept)
     return (batch, np.arange(n), tuple(f"{stem}#{i}" for i in range(n)),
