@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import _numpy_cslstm
+from _textbook_lstm import textbook_lstm
 from diffsense.predictors._model import model_from_params, param_shapes
 from diffsense.predictors import (
     CSLSTMPredictor,
@@ -243,20 +244,6 @@ def test_small_public_functions_under_jit_equal_eager():
         np.testing.assert_allclose(jax.jit(fn)(*args), fn(*args), rtol=1e-12, atol=1e-12)
 
 
-def _textbook_lstm(xs, w_ih, w_hh, b):
-    """The LSTM with logistic gates, one step at a time; xs [T, N, in] -> all h [T, N, H]."""
-
-    def step(carry, x):
-        h, c = carry
-        i, f, g, o = jnp.split(x @ w_ih + h @ w_hh + b, 4, axis=-1)
-        c = jax.nn.sigmoid(f) * c + jax.nn.sigmoid(i) * jnp.tanh(g)
-        h = jax.nn.sigmoid(o) * jnp.tanh(c)
-        return (h, c), h
-
-    zeros = jnp.zeros((xs.shape[1], w_hh.shape[0]), xs.dtype)
-    return jax.lax.scan(step, (zeros, zeros), xs)[1]
-
-
 def test_lstm_hand_written_backward_matches_autodiff():
     # Both recurrences, value and gradient w.r.t. every argument (weights too: training uses them),
     # against JAX's autodiff of the textbook LSTM, in float64.
@@ -275,16 +262,16 @@ def test_lstm_hand_written_backward_matches_autodiff():
         return jnp.where(z >= 0, z, 0.1 * z)
 
     cases = [
-        (lambda x, *p: lstm_last(x, *p), lambda x, *p: _textbook_lstm(x, *p)[-1], xs, probe_last),
+        (lambda x, *p: lstm_last(x, *p), lambda x, *p: textbook_lstm(x, *p)[-1], xs, probe_last),
         (
             lambda x, *p: lstm_last(x, *p[:3], emb=p[3:]),
-            lambda x, *p: _textbook_lstm(embedded(x, *p[3:]), *p[:3])[-1],
+            lambda x, *p: textbook_lstm(embedded(x, *p[3:]), *p[:3])[-1],
             xy,
             probe_last,
         ),
         (
             lambda x, *p: lstm_repeat(t, x, *p),
-            lambda x, *p: _textbook_lstm(jnp.broadcast_to(x, (t,) + x.shape), *p),
+            lambda x, *p: textbook_lstm(jnp.broadcast_to(x, (t,) + x.shape), *p),
             x1,
             probe_all,
         ),

@@ -6,7 +6,7 @@ The shipped implementation is the CS-LSTM (Deo & Trivedi 2018) in Flax NNX, SI a
 
 Entry points: `load_predictor` (shipped weights, a project `.msgpack`, or a published PyTorch
 checkpoint read without torch), `predict_mean` (compact neighbours) and `predict_mean_dense`
-(the 39-slot grid), both pure and jit/grad-able; `with_compute_dtype` runs any predictor at its
+(the 39-slot grid), both pure and jit/grad-able (reverse mode; `jax.jvp` inside `forward_mode()`); `with_compute_dtype` runs any predictor at its
 own float precision inside an objective of another (float32 inside a float64 E(r)). `si_to_model` / `model_to_si` are the only unit
 and axis conversion. CLI: `python -m diffsense.predictors {parity,card}`.
 """
@@ -25,6 +25,7 @@ from diffsense.predictors._protocol import CSLSTM_SPEC, InputSpec, Predictor, Pr
 from diffsense.predictors._checkpoint import read_state_dict
 from diffsense.predictors._convert import model_from_state_dict, state_dict_from_model
 from diffsense.predictors._frame import M_PER_FT, model_to_si, si_to_model
+from diffsense.predictors._lstm_forward import forward_mode
 from diffsense.predictors._model import (
     FUT_LEN,
     HIST_LEN,
@@ -45,6 +46,7 @@ __all__ = [
     "PredictorInputs",
     "CSLSTM",
     "DEFAULT_WEIGHTS",
+    "forward_mode",
     "FUT_LEN",
     "HIST_LEN",
     "M_PER_FT",

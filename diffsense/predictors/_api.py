@@ -19,8 +19,10 @@ probable lateral and the most probable longitudinal class, as the reference eval
 inputs). The single-mode variant has one trajectory and ignores `mode`. Under jit, `mode` is a
 static argument: `jax.jit(predict_mean, static_argnames="mode")`.
 
-Differentiation is reverse-mode (`jax.grad`, `jax.vjp`): the LSTM has a hand-written backward
-(`jax.custom_vjp`), so forward-mode `jax.jvp` is not available.
+Differentiation is reverse mode (`jax.grad`, `jax.vjp`) by default: the LSTM has a hand-written
+backward (`jax.custom_vjp`). Traced inside `diffsense.predictors.forward_mode()`, it has a
+forward-mode rule instead (`jax.jvp`; reverse mode is then unavailable), which
+`diffsense.metrics.value_and_grad` uses for a one-parameter objective.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The LSTM recurrences of CS-LSTM with a hand-written backward pass.
+"""The LSTM recurrences of CS-LSTM with a hand-written backward pass (and a forward mode).
 
 `lstm_last(x, w_ih, w_hh, b, emb)`: the encoder, a time-major sequence [T, N, d] -> the last
 hidden state [N, H]; with emb = (emb_w, emb_b) the LSTM's input is leaky_relu(x_t @ emb_w + emb_b),
@@ -6,12 +6,12 @@ formed inside the step (CS-LSTM's ip_emb of the (x, y) history: no [T, N, in] ar
 `lstm_repeat(steps, x, w_ih, w_hh, b)`: the decoder, whose input [N, in] is the same at every
 step -> all hidden states [T, N, H]; its input is projected once, and the gradient of the
 projection is the sum of the per-step gate gradients. `b` is b_ih + b_hh; the state starts at
-zero. Both are differentiable in every argument (reverse mode only: `jax.custom_vjp`).
+zero. Both are differentiable in every argument: in reverse mode (`jax.custom_vjp`, below) by
+default, in forward mode (`jax.jvp`) while traced inside `forward_mode()` (`_lstm_forward.py`).
 
 How it is computed (each choice measured on the 2-core CPU against the alternatives; see
 benchmarks/bench_lstm.py):
-- sigmoid(z) = (1 + tanh(z / 2)) / 2, so one tanh over all four gates gives i, f, g and o once
-  the i, f, o columns of the weights are halved (an exact scaling by a power of two).
+- One tanh over all four gates (the cell and `unrolled`, the primal, are in `_lstm_cell.py`).
 - Encoder gates come from one [x_t, h] @ [w_ih; w_hh] per step. This also keeps the T input
   projections from being hoisted ahead of the recurrence, where all would be alive at once.
 - The plain forward pass (no gradient) is Python-unrolled: straight-line code, no loop carries.
@@ -34,29 +34,18 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from diffsense.predictors._lstm_cell import Gates, cell_step, leaky_relu, split_gates, unrolled
+from diffsense.predictors._lstm_forward import forward_mode_active, lstm_forward
+
+__all__ = ["leaky_relu", "lstm_last", "lstm_repeat"]
+
 REMAT_BYTES = 16 * 2**20  # recompute the gates in the backward pass above this size [bytes]
-
-
-def _halve_ifo(w: jax.Array, hidden: int) -> jax.Array:
-    half = jnp.full((hidden,), 0.5, w.dtype)
-    return w * jnp.concatenate([half, half, jnp.ones((hidden,), w.dtype), half])
-
-
-def _split(t: jax.Array, hidden: int):
-    return tuple(t[..., k * hidden : (k + 1) * hidden] for k in range(4))
-
-
-def _cell(t, c, hidden):
-    """New (h, c) from t = tanh of the halved gates (i/2, f/2, g, o/2) and the old c."""
-    ti, tf, tg, to = _split(t, hidden)
-    c_new = (0.5 + 0.5 * tf) * c + (0.5 + 0.5 * ti) * tg
-    return (0.5 + 0.5 * to) * jnp.tanh(c_new), c_new
 
 
 def _gate_grads(dh, dc_next, t, c, c_prev, hidden):
     """Gradient w.r.t. the gate pre-activations of a step (from dL/dh_t and the dL/dc_t that comes
     through c_{t+1}), and the part of dL/dc_{t-1} that goes through c_t."""
-    ti, tf, tg, to = _split(t, hidden)
+    ti, tf, tg, to = split_gates(t, hidden)
     i, f = 0.5 + 0.5 * ti, 0.5 + 0.5 * tf
     tc = jnp.tanh(c)
     dc = dc_next + dh * (0.5 + 0.5 * to) * (1.0 - tc * tc)
@@ -73,66 +62,17 @@ def _gate_grads(dh, dc_next, t, c, c_prev, hidden):
     return dz, dc * f
 
 
-def leaky_relu(x: jax.Array) -> jax.Array:
-    """LeakyReLU with slope 0.1, the reference's only hidden activation."""
-    return jnp.where(x >= 0, x, 0.1 * x)
-
-
-class _Gates:
-    """gates(x_t, h) = tanh of the halved pre-activations. `x` is [T, N, d] (a sequence) or [N, in]
-    (repeated). A sequence may come with an embedding (emb_w [d, in], emb_b [in]): the LSTM input
-    is then leaky_relu(x_t @ emb_w + emb_b), formed inside the step (d = 2 for CS-LSTM's (x, y):
-    two multiply-adds, no [T, N, in] array)."""
-
-    def __init__(self, x, emb, w_ih, w_hh, b):
-        hidden = w_hh.shape[0]
-        self.hidden, self.repeated, self.emb = hidden, x.ndim == 2, emb
-        wi, self.wh, bs = (_halve_ifo(a, hidden) for a in (w_ih, w_hh, b))
-        if self.repeated:
-            self.xw = x @ wi + bs  # the same input at every step: projected once
-        else:
-            self.w, self.bs, self.n_in = jnp.concatenate([wi, self.wh], 0), bs, wi.shape[0]
-
-    def pre_embedding(self, xt):
-        emb_w, emb_b = self.emb
-        return sum(xt[..., k : k + 1] * emb_w[k] for k in range(emb_w.shape[0])) + emb_b
-
-    def input(self, xt):
-        return xt if self.emb is None else leaky_relu(self.pre_embedding(xt))
-
-    def __call__(self, xt, h):
-        if self.repeated:
-            return jnp.tanh(self.xw + h @ self.wh)
-        if h is None:  # h = 0: no recurrent matmul
-            return jnp.tanh(self.input(xt) @ self.w[: self.n_in] + self.bs)
-        return jnp.tanh(jnp.concatenate([self.input(xt), h], -1) @ self.w + self.bs)
-
-
-def _primal(steps, x, emb, w_ih, w_hh, b):
-    gates = _Gates(x, emb, w_ih, w_hh, b)
-    h = c = jnp.zeros((x.shape[-2], gates.hidden), x.dtype)
-    hs = []
-    for k in range(steps):
-        if gates.repeated:
-            t = jnp.tanh(gates.xw) if k == 0 else gates(None, h)
-        else:
-            t = gates(x[k], h if k else None)
-        h, c = _cell(t, c, gates.hidden)
-        hs.append(h)
-    return hs
-
-
 def _remat(steps, x, hidden) -> bool:
     return steps * x.shape[-2] * 4 * hidden * x.dtype.itemsize > REMAT_BYTES
 
 
 def _fwd(steps, last_only, x, emb, w_ih, w_hh, b):
-    gates, remat = _Gates(x, emb, w_ih, w_hh, b), _remat(steps, x, w_hh.shape[0])
+    gates, remat = Gates(x, emb, w_ih, w_hh, b), _remat(steps, x, w_hh.shape[0])
 
     def step(carry, xt):
         h, c = carry
         t = gates(xt, h)
-        h_new, c_new = _cell(t, c, gates.hidden)
+        h_new, c_new = cell_step(t, c, gates.hidden)
         return (h_new, c_new), (None if last_only else h_new, h, c, None if remat else t)
 
     zeros = jnp.zeros((x.shape[-2], gates.hidden), x.dtype)
@@ -144,7 +84,7 @@ def _fwd(steps, last_only, x, emb, w_ih, w_hh, b):
 
 def _bwd(steps, last_only, res, dhs):
     x, emb, h_prev, c_prev, ts, c_last, w_ih, w_hh, b = res
-    gates = _Gates(x, emb, w_ih, w_hh, b)
+    gates = Gates(x, emb, w_ih, w_hh, b)
     hidden, repeated = gates.hidden, gates.repeated
     w_back = w_hh.T if repeated else jnp.concatenate([w_hh, w_ih], 0).T  # [4H, H (+ in)]
 
@@ -178,11 +118,16 @@ def _bwd(steps, last_only, res, dhs):
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
 def _lstm(steps, last_only, x, emb, w_ih, w_hh, b):
-    hs = _primal(steps, x, emb, w_ih, w_hh, b)
+    hs = unrolled(steps, x, emb, w_ih, w_hh, b)
     return hs[-1] if last_only else jnp.stack(hs)
 
 
 _lstm.defvjp(_fwd, _bwd)
+
+
+def _recurrence():
+    """The differentiation rule in force while tracing: forward mode inside `forward_mode()`."""
+    return lstm_forward if forward_mode_active() else _lstm
 
 
 def lstm_repeat(
@@ -193,7 +138,7 @@ def lstm_repeat(
     b: Float[Array, "4H"],
 ) -> Float[Array, "T N H"]:
     """All `steps` hidden states of a one-layer LSTM fed `x` at every step."""
-    return _lstm(steps, False, x, None, w_ih, w_hh, b)
+    return _recurrence()(steps, False, x, None, w_ih, w_hh, b)
 
 
 def lstm_last(
@@ -205,4 +150,4 @@ def lstm_last(
 ) -> Float[Array, "N H"]:
     """The last hidden state of a one-layer LSTM over a time-major sequence; with `emb` =
     (emb_w, emb_b) the LSTM's input is leaky_relu(x_t @ emb_w + emb_b) (slope 0.1)."""
-    return _lstm(x.shape[0], True, x, emb, w_ih, w_hh, b)
+    return _recurrence()(x.shape[0], True, x, emb, w_ih, w_hh, b)

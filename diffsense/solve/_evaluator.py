@@ -19,7 +19,7 @@ import numpy as np
 
 from diffsense._distributed import to_host
 from diffsense._executables import call
-from diffsense.metrics import ReferenceEvaluation, is_deterministic
+from diffsense.metrics import ReferenceEvaluation, is_deterministic, value_and_grad
 
 
 def _deterministic(objective: Any) -> bool:
@@ -28,7 +28,8 @@ def _deterministic(objective: Any) -> bool:
 
 
 def _value_and_grad(objective, x, tau):
-    return jax.value_and_grad(lambda v: objective.e2(objective.point(v), tau))(x)
+    # forward mode for one parameter (one tangent through the CS-LSTM), reverse mode for more
+    return value_and_grad(lambda v: objective.e2(objective.point(v), tau))(x)
 
 
 def _hard(objective, x):
