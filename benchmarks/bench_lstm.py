@@ -9,6 +9,9 @@ minimum) of --repeats interleaved rounds after a warm-up, with XLA's temporary m
 - forward: `diffsense.predictors._lstm` (Python-unrolled) against a `lax.scan` of the same cell.
 - input gradient: the hand-written backward, with the gates kept or recomputed in the backward
   pass (REMAT_BYTES forced either way), against JAX's autodiff of a textbook `lax.scan` LSTM.
+- input tangent: forward mode (`diffsense.predictors.forward_mode`, one tangent along the inputs,
+  what a one-parameter E(r) needs), with the primal and tangent rows in one product per step or
+  in two (this project stacks them below STACK_ROWS rows).
 - a sum over the leading axis of a [16, 1664, 256] array: `x.sum(0)` against 15 additions.
 - the per-step matmuls alone, XLA against PyTorch (MKL), in GFLOP/s: the ceiling that the
   recurrences run against (when torch, the `bench` extra, is installed).
@@ -17,6 +20,7 @@ minimum) of --repeats interleaved rounds after a warm-up, with XLA's temporary m
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import statistics
 import time
@@ -25,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense.predictors import _lstm
+from diffsense.predictors import _lstm, _lstm_forward
 
 
 def _scan_lstm(xs, w_ih, w_hh, b):
@@ -58,16 +62,19 @@ def _variants(steps, repeated):
     return ours, scan
 
 
-def _compile(fn, args, remat_bytes=None):
-    saved = _lstm.REMAT_BYTES
+def _compile(fn, args, remat_bytes=None, forward=False, stack_rows=None):
+    saved = _lstm.REMAT_BYTES, _lstm_forward.STACK_ROWS
     if remat_bytes is not None:
         _lstm.REMAT_BYTES = remat_bytes  # read while tracing
+    if stack_rows is not None:
+        _lstm_forward.STACK_ROWS = stack_rows
     try:
         t0 = time.perf_counter()
-        exe = jax.jit(fn).lower(*args).compile()
+        with _lstm_forward.forward_mode() if forward else contextlib.nullcontext():
+            exe = jax.jit(fn).lower(*args).compile()
         compile_s = time.perf_counter() - t0
     finally:
-        _lstm.REMAT_BYTES = saved
+        _lstm.REMAT_BYTES, _lstm_forward.STACK_ROWS = saved
     return exe, compile_s, exe.memory_analysis().temp_size_in_bytes / 2**20
 
 
@@ -75,12 +82,16 @@ def _rows(steps, n, n_in, hidden, repeated):
     args = _problem(steps, n, n_in, hidden, repeated)
     ours, scan = _variants(steps, repeated)
     grad = lambda f: jax.grad(lambda *a: jnp.sum(jnp.tanh(f(*a))))  # a nonlinear read-out
+    # the same read-out's derivative along one input direction (a single-parameter E(r) needs one)
+    tangent = lambda f: lambda x, *w: jax.jvp(lambda x: jnp.sum(jnp.tanh(f(x, *w))), (x,), (jnp.ones_like(x),))
     return {
         "forward, unrolled (this project)": _compile(ours, args),
         "forward, lax.scan": _compile(scan, args),
         "input gradient, gates kept": _compile(grad(ours), args, remat_bytes=2**62),
         "input gradient, gates recomputed": _compile(grad(ours), args, remat_bytes=0),
         "input gradient, autodiff of lax.scan": _compile(grad(scan), args),
+        "input tangent, rows stacked": _compile(tangent(ours), args, forward=True, stack_rows=2**62),
+        "input tangent, rows apart": _compile(tangent(ours), args, forward=True, stack_rows=0),
     }, args
 
 

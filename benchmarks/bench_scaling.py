@@ -16,11 +16,14 @@ XLA_FLAGS=--xla_force_host_platform_device_count=D and JAX_PLATFORMS=--platform 
 is imported, so D simulated CPU devices split the host's cores between them. In it:
 - build [s]: `diffsense.objective(problem)` (scene simulation and ground-truth predictions);
 - compile [s]: tracing, lowering and compiling the value program (E^2, the soft value the
-  solver minimises) and the value-and-gradient program (`jax.value_and_grad` of it), each
+  solver minimises) and the value-and-gradient program the solver runs
+  (`diffsense.metrics.value_and_grad` of it: forward mode, as the parameter is one number), each
   with the objective as an argument (not folded in as constants), apart from the run time;
 - value, value+grad [s]: medians over --repeats rounds after one warm-up call each; every round
   calls both programs, in a shuffled order;
-- ratio = value+grad / value (issue #14's target: <= 2.5);
+- ratio = value+grad / value (issue #14's target: <= 2.5); reverse = the same ratio for
+  reverse mode (`jax.value_and_grad`, what a problem of several parameters runs), timed in the
+  same rounds;
 - per scene [ms]: value+grad divided by the scenes (variants x scenarios);
 - peak RSS [MB]: ru_maxrss of the worker process (imports, build, compile and runs together).
 A configuration that fails (out of memory, --timeout-s) is reported as a row with its error
@@ -44,7 +47,7 @@ RATIO_TARGET = 2.5  # issue #14: one value-and-gradient evaluation <= 2.5x one v
 LOAD_WARNING = 1.5
 MAX_SCENARIOS = 6  # the paper's six (diffsense.metrics.PAPER_SCENARIOS), taken in order
 COLUMNS = ("devices", "variants", "scenarios", "scenes", "build [s]", "compile value / v+g [s]", "value [s]",
-           "value+grad [s]", "ratio", "v+g per scene [ms]", "peak RSS [MB]")
+           "value+grad [s]", "ratio", "reverse", "v+g per scene [ms]", "peak RSS [MB]")
 
 
 def _ints(text: str) -> list[int]:
@@ -64,9 +67,12 @@ def _programs(objective, r: dict) -> tuple[dict, dict[str, float]]:
     import equinox as eqx
     import jax
 
+    from diffsense.metrics import value_and_grad
+
     arrays, static = eqx.partition(objective, eqx.is_array)
     value = lambda a, r: eqx.combine(a, static).e2(r)  # noqa: E731
-    jobs = {"value": value, "value_and_grad": jax.value_and_grad(value, argnums=1)}
+    jobs = {"value": value, "value_and_grad": lambda a, r: value_and_grad(lambda q: value(a, q))(r),
+            "reverse": jax.value_and_grad(value, argnums=1)}
     fns, compile_s = {}, {}
     for name, fn in jobs.items():
         t0 = time.perf_counter()
@@ -102,6 +108,7 @@ def worker(args) -> dict:
         "compile_value_s": compile_s["value"], "compile_value_and_grad_s": compile_s["value_and_grad"],
         "value_s": median_s["value"], "value_and_grad_s": median_s["value_and_grad"],
         "ratio": median_s["value_and_grad"] / median_s["value"],
+        "reverse_ratio": median_s["reverse"] / median_s["value"],
         "value_and_grad_per_scene_ms": 1e3 * median_s["value_and_grad"] / scenes,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "repeats": args.repeats, "load_before": load_before, "load_after": os.getloadavg()[0],
@@ -143,7 +150,7 @@ def _cells(row: dict) -> list[str]:
     if "error" in row:
         return head + [f"failed: {row['error']}"] + [""] * (len(COLUMNS) - len(head) - 1)
     return head + [f"{row['build_s']:.1f}", f"{row['compile_value_s']:.1f} / {row['compile_value_and_grad_s']:.1f}",
-                   f"{row['value_s']:.3f}", f"{row['value_and_grad_s']:.3f}", f"{row['ratio']:.2f}",
+                   f"{row['value_s']:.3f}", f"{row['value_and_grad_s']:.3f}", f"{row['ratio']:.2f}", f"{row['reverse_ratio']:.2f}",
                    f"{row['value_and_grad_per_scene_ms']:.1f}", f"{row['peak_rss_mb']:.0f}"]
 
 

@@ -32,12 +32,12 @@ def test_a_failed_configuration_is_a_row_of_its_own():
     bench = _module()
     good = {"devices": 1, "variants": 2, "scenarios": 1, "scenes": 2, "build_s": 1.0, "compile_value_s": 2.0,
             "compile_value_and_grad_s": 3.0, "value_s": 0.01, "value_and_grad_s": 0.02, "ratio": 2.0,
-            "value_and_grad_per_scene_ms": 10.0, "peak_rss_mb": 700.0}
+            "reverse_ratio": 2.75, "value_and_grad_per_scene_ms": 10.0, "peak_rss_mb": 700.0}
     bad = {"devices": 4, "variants": 256, "scenarios": 6, "scenes": 1536, "error": "exit -9 (killed: out of memory?)"}
     lines = bench.table([good, bad]).splitlines()
     widths = {line.count("|") for line in lines}
     assert len(widths) == 1 and len(lines) == 4
-    assert "| 1 | 2 | 1 | 2 | 1.0 | 2.0 / 3.0 | 0.010 | 0.020 | 2.00 | 10.0 | 700 |" in lines
+    assert "| 1 | 2 | 1 | 2 | 1.0 | 2.0 / 3.0 | 0.010 | 0.020 | 2.00 | 2.75 | 10.0 | 700 |" in lines
     assert "failed: exit -9" in lines[3]
 
 
@@ -56,4 +56,5 @@ def test_tiny_run_prints_a_table_and_writes_consistent_json(tmp_path):
         assert "error" not in row and row["dtype"] == "float64"
         assert row["value_s"] > 0 and row["value_and_grad_s"] > 0 and row["peak_rss_mb"] > 0
         assert row["ratio"] == pytest.approx(row["value_and_grad_s"] / row["value_s"], rel=1e-12)
+        assert row["reverse_ratio"] > 0
         assert row["value_and_grad_per_scene_ms"] == pytest.approx(1e3 * row["value_and_grad_s"] / 2, rel=1e-12)
