@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from diffsense import metrics
 from diffsense import sensors as sensor
 from diffsense.metrics._estimators import straight_through
 from tests.test_reference import H, radar_objective
@@ -56,6 +57,21 @@ def test_gradient_is_relaxed_references_and_matches_its_float64_central_differen
     ref = float(reference(st, 8.0).e2)
     assert abs(float(e2(rr, 8.0, 50.0)) - ref) > 1e-3 * ref
     assert float(e2(st, 8.0, 50.0)) == pytest.approx(ref, rel=1e-12)
+
+
+_forward = eqx.filter_jit(lambda o, r, tau: metrics.value_and_grad(lambda x: o.e2({H: x}, tau))(r))
+
+
+@pytest.mark.parametrize("kind", ["straight-through", "relaxed-reference"])
+def test_forward_mode_equals_reverse_mode(st, kind):
+    # The solver's one-parameter value-and-gradient carries a tangent through the draws instead.
+    o = st if kind == "straight-through" else radar_objective(kind=kind, draws=DRAWS)
+    for r in (9.0, 12.0):
+        value, grad = _forward(o, jnp.asarray(r), jnp.asarray(1.0))
+        want_value, want_grad = value_and_grad(o, r, 1.0)
+        assert abs(float(want_grad)) > 1e-6
+        assert float(value) == pytest.approx(float(want_value), rel=1e-13)
+        assert float(grad) == pytest.approx(float(want_grad), rel=1e-10)
 
 
 def test_finite_at_the_extremes(st):
