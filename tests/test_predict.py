@@ -244,11 +244,16 @@ def test_small_public_functions_under_jit_equal_eager():
         np.testing.assert_allclose(jax.jit(fn)(*args), fn(*args), rtol=1e-12, atol=1e-12)
 
 
-def test_lstm_hand_written_backward_matches_autodiff():
+@pytest.mark.parametrize("remat_bytes", [16 * 2**20, 0], ids=["gates-kept", "gates-recomputed"])
+def test_lstm_hand_written_backward_matches_autodiff(monkeypatch, remat_bytes):
     # Both recurrences, value and gradient w.r.t. every argument (weights too: training uses them),
-    # against JAX's autodiff of the textbook LSTM, in float64.
+    # against JAX's autodiff of the textbook LSTM, in float64. Both ways of the backward pass:
+    # with the forward pass's gates kept, and recomputed (what batches above REMAT_BYTES run,
+    # the main job's among them, and no small test reaches unless the threshold is lowered).
+    from diffsense.predictors import _lstm
     from diffsense.predictors._lstm import lstm_last, lstm_repeat
 
+    monkeypatch.setattr(_lstm, "REMAT_BYTES", remat_bytes)
     rng = np.random.default_rng(13)
     t, n, n_in, hidden = 5, 3, 6, 4
     w = [rng.normal(size=s) for s in ((n_in, 4 * hidden), (hidden, 4 * hidden), (4 * hidden,))]
@@ -256,6 +261,10 @@ def test_lstm_hand_written_backward_matches_autodiff():
     probe_last, probe_all = rng.normal(size=(n, hidden)), rng.normal(size=(t, n, hidden))
     emb = [rng.normal(size=(2, n_in)), rng.normal(size=n_in)]
     xy = rng.normal(size=(t, n, 2))
+    # Pre-activations of the embedding exactly at leaky_relu's kink: a zero history row and a zero
+    # bias give pre = 0, where the primal takes the slope-1 branch and so must the gradient.
+    xy[:, 0] = 0.0
+    emb[1][:2] = 0.0
 
     def embedded(x, a, c):  # leaky_relu(x @ a + c), slope 0.1
         z = x @ a + c
@@ -286,3 +295,49 @@ def test_lstm_hand_written_backward_matches_autodiff():
             np.testing.assert_allclose(g, ref, rtol=1e-12, atol=1e-13)
         # Under jit as well (XLA fuses the unrolled forward differently from eager mode).
         np.testing.assert_allclose(jax.jit(got_fn)(x, *p), want_fn(x, *p), rtol=1e-13, atol=1e-14)
+
+
+def test_gates_are_kept_up_to_remat_bytes_and_recomputed_above():
+    # The reverse pass keeps the forward pass's gates [T, N, 4H] while they take at most
+    # REMAT_BYTES, and recomputes them in the backward pass above: the boundary in rows.
+    from functools import partial
+
+    from diffsense.predictors import _lstm
+
+    t, n_in, hidden = 16, 32, 64
+    row_bytes = t * 4 * hidden * np.dtype(np.float32).itemsize
+    fit = _lstm.REMAT_BYTES // row_bytes
+    assert fit * row_bytes == _lstm.REMAT_BYTES  # the boundary falls on a whole row here
+    weights = [jax.ShapeDtypeStruct(s, jnp.float32) for s in ((n_in, 4 * hidden), (hidden, 4 * hidden), (4 * hidden,))]
+    for rows, kept in ((fit, True), (fit + 1, False)):
+        x = jax.ShapeDtypeStruct((t, rows, n_in), jnp.float32)
+        _, residuals = jax.eval_shape(partial(_lstm._fwd, t, True), x, None, *weights)
+        assert (residuals[4] is not None) == kept, rows
+
+
+@pytest.mark.parametrize("remat_bytes", [16 * 2**20, 0], ids=["gates-kept", "gates-recomputed"])
+def test_float32_recurrences_stay_float32_in_every_mode(monkeypatch, remat_bytes):
+    # The predictor runs in float32 inside a float64 solver (x64 on): the recurrences' values,
+    # their reverse-mode gradients and their forward-mode tangents keep float32 throughout (a
+    # float64 state or zero would promote the whole pass, at twice the cost).
+    from diffsense.predictors import _lstm, forward_mode
+    from diffsense.predictors._lstm import lstm_last, lstm_repeat
+
+    monkeypatch.setattr(_lstm, "REMAT_BYTES", remat_bytes)
+    rng = np.random.default_rng(3)
+    t, n, n_in, hidden = 4, 3, 5, 4
+    f32 = lambda *shape: jnp.asarray(rng.normal(size=shape), jnp.float32)  # noqa: E731
+    w = (f32(n_in, 4 * hidden), f32(hidden, 4 * hidden), f32(4 * hidden))
+    emb = (f32(2, n_in), f32(n_in))
+    cases = [
+        (lambda x: lstm_last(x, *w), f32(t, n, n_in)),
+        (lambda x: lstm_last(x, *w, emb=emb), f32(t, n, 2)),
+        (lambda x: lstm_repeat(t, x, *w), f32(n, n_in)),
+    ]
+    for fn, x in cases:
+        value, pullback = jax.vjp(fn, x)
+        (grad,) = pullback(jnp.ones_like(value))
+        with forward_mode():
+            primal, tangent = jax.jvp(fn, (x,), (jnp.ones_like(x),))
+        dtypes = {a.dtype for a in (value, grad, primal, tangent)}
+        assert dtypes == {jnp.dtype(jnp.float32)}, dtypes
