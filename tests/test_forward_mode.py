@@ -27,10 +27,15 @@ def _cases(rng):
         z = x @ a + c
         return jnp.where(z >= 0, z, 0.1 * z)
 
+    # Embedding pre-activations exactly at leaky_relu's kink (a zero history row, a zero bias):
+    # the primal takes the slope-1 branch there, and so must the tangent.
+    xy = rng.normal(size=(t, n, 2))
+    xy[:, 0] = 0.0
+    emb[1][:2] = 0.0
     return [
         (lambda x, *p: lstm_last(x, *p), lambda x, *p: textbook_lstm(x, *p)[-1], rng.normal(size=(t, n, n_in)), w),
         (lambda x, *p: lstm_last(x, *p[:3], emb=tuple(p[3:])),
-         lambda x, *p: textbook_lstm(embedded(x, *p[3:]), *p[:3])[-1], rng.normal(size=(t, n, 2)), w + emb),
+         lambda x, *p: textbook_lstm(embedded(x, *p[3:]), *p[:3])[-1], xy, w + emb),
         (lambda x, *p: lstm_repeat(t, x, *p),
          lambda x, *p: textbook_lstm(jnp.broadcast_to(x, (t,) + x.shape), *p), rng.normal(size=(n, n_in)), w),
     ]
@@ -52,6 +57,24 @@ def test_recurrence_tangents_match_autodiff(monkeypatch, stack_rows):
         np.testing.assert_allclose(d_got, d_want, rtol=1e-12, atol=1e-13)
         np.testing.assert_allclose(got_x, want, rtol=1e-13, atol=1e-14)
         np.testing.assert_allclose(d_got_x, d_want_x, rtol=1e-12, atol=1e-13)
+
+
+def test_a_tangent_on_one_argument_alone_matches_autodiff():
+    # The others' tangents are symbolic zeros (`symbolic_zeros=True`): the rule forms only what
+    # is given, and a weight's tangent alone (the input held fixed) still reaches the output.
+    rng = np.random.default_rng(9)
+    for case, (got_fn, want_fn, x, p) in enumerate(_cases(rng)):
+        args = (x, *p)
+        for i, arg in enumerate(args):
+            dt = rng.normal(size=np.shape(arg))
+
+            def only(fn, i=i):
+                return lambda a: fn(*args[:i], a, *args[i + 1:])
+
+            _, d_want = jax.jvp(only(want_fn), (arg,), (dt,))
+            with forward_mode():
+                _, d_got = jax.jvp(only(got_fn), (arg,), (dt,))
+            np.testing.assert_allclose(d_got, d_want, rtol=1e-12, atol=1e-13, err_msg=f"case {case}, argument {i}")
 
 
 def test_forward_mode_is_a_switch_read_while_tracing():

@@ -121,14 +121,13 @@ def _loop(step, first, xs, length, last_only):
 
 
 def _input_tangent(gates, xt, dxt, demb):
-    """(u_t, du_t): the LSTM input at a step of a sequence and its tangent."""
+    """(u_t, du_t): the LSTM input at a step of a sequence and its tangent (`dxt` an array: the
+    sequence's tangent is materialised before the scan slices it)."""
     if gates.emb is None:
-        return xt, _materialise(dxt, xt)
+        return xt, dxt
     pre = gates.pre_embedding(xt)
     emb_w, _ = gates.emb
-    dpre = jnp.zeros_like(pre)
-    if _given(dxt):
-        dpre = dpre + sum(dxt[..., k : k + 1] * emb_w[k] for k in range(emb_w.shape[0]))
+    dpre = sum(dxt[..., k : k + 1] * emb_w[k] for k in range(emb_w.shape[0]))
     if demb is not None and _given(demb[0]):
         dpre = dpre + sum(xt[..., k : k + 1] * demb[0][k] for k in range(emb_w.shape[0]))
     if demb is not None and _given(demb[1]):
