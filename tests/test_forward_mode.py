@@ -77,6 +77,20 @@ def test_a_tangent_on_one_argument_alone_matches_autodiff():
             np.testing.assert_allclose(d_got, d_want, rtol=1e-12, atol=1e-13, err_msg=f"case {case}, argument {i}")
 
 
+def test_primal_and_tangent_rows_share_one_product_below_stack_rows():
+    # The documented policy: fewer than STACK_ROWS rows take one [2N, k] product, more take two;
+    # decided by the rows, however many columns the rows have.
+    rows = _lstm_forward.STACK_ROWS
+    w = jnp.ones((rows + 3, 8))
+    for n, products in ((rows - 1, 1), (rows, 2)):
+        a = jnp.ones((n, rows + 3))
+        jaxpr = jax.make_jaxpr(_lstm_forward._stacked)(a, 2.0 * a, w)
+        assert sum(e.primitive.name == "dot_general" for e in jaxpr.jaxpr.eqns) == products, n
+        got, d_got = _lstm_forward._stacked(a, 2.0 * a, w)
+        np.testing.assert_array_equal(got, a @ w)
+        np.testing.assert_array_equal(d_got, (2.0 * a) @ w)
+
+
 def test_forward_mode_is_a_switch_read_while_tracing():
     rng = np.random.default_rng(8)
     got_fn, _, x, p = _cases(rng)[0]
