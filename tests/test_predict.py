@@ -341,3 +341,14 @@ def test_float32_recurrences_stay_float32_in_every_mode(monkeypatch, remat_bytes
             primal, tangent = jax.jvp(fn, (x,), (jnp.ones_like(x),))
         dtypes = {a.dtype for a in (value, grad, primal, tangent)}
         assert dtypes == {jnp.dtype(jnp.float32)}, dtypes
+
+
+def test_leaky_relu_takes_the_slope_one_branch_at_zero():
+    # One convention at the kink for every way the network is differentiated: the hand-written
+    # reverse and forward rules take slope 1 at a pre-activation of exactly 0, and so does
+    # autodiff of the primal (the other layers, and the reference's checks).
+    from diffsense.predictors._lstm_cell import leaky_relu
+
+    x = jnp.array([-2.0, 0.0, 3.0])
+    np.testing.assert_array_equal(leaky_relu(x), [-0.2, 0.0, 3.0])
+    np.testing.assert_array_equal(jax.vmap(jax.grad(leaky_relu))(x), [0.1, 1.0, 1.0])
