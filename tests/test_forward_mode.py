@@ -78,8 +78,8 @@ def test_a_tangent_on_one_argument_alone_matches_autodiff():
 
 
 def test_primal_and_tangent_rows_share_one_product_below_stack_rows():
-    # The documented policy: fewer than STACK_ROWS rows take one [2N, k] product, more take two;
-    # decided by the rows, however many columns the rows have.
+    # The documented policy: fewer than STACK_ROWS rows take one [2N, k] product, STACK_ROWS
+    # rows or more take two; decided by the rows, however many columns they have.
     rows = _lstm_forward.STACK_ROWS
     w = jnp.ones((rows + 3, 8))
     for n, products in ((rows - 1, 1), (rows, 2)):

@@ -248,8 +248,9 @@ def test_small_public_functions_under_jit_equal_eager():
 def test_lstm_hand_written_backward_matches_autodiff(monkeypatch, remat_bytes):
     # Both recurrences, value and gradient w.r.t. every argument (weights too: training uses them),
     # against JAX's autodiff of the textbook LSTM, in float64. Both ways of the backward pass:
-    # with the forward pass's gates kept, and recomputed (what batches above REMAT_BYTES run,
-    # the main job's among them, and no small test reaches unless the threshold is lowered).
+    # with the forward pass's gates kept, and recomputed (what reverse mode runs for batches above
+    # REMAT_BYTES, such as the main job's scenes in a problem of several parameters, and no small
+    # test reaches unless the threshold is lowered).
     from diffsense.predictors import _lstm
     from diffsense.predictors._lstm import lstm_last, lstm_repeat
 
