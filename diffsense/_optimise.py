@@ -21,6 +21,7 @@ from diffsense import _line_report as report
 from diffsense import config as cfgio
 from diffsense._answer import near_optimal
 from diffsense._domain import domain_check, domain_note
+from diffsense._executables import call
 from diffsense._problem import Problem
 from diffsense._result import Result
 from diffsense._timing import CompileClock
@@ -72,7 +73,7 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
     sensor = problem.make_sensor()
     predictor = _predictor(problem) if predictor is None else predictor
     predictor = _in_dtype(predictor, problem.predictor_dtype, dtype)
-    noise_key = jax.random.split(jax.random.PRNGKey(problem.seed))[1]  # [0] is the scenes' (traffic_scenes)
+    noise_key = seed_keys(problem.seed)[1]  # [0] is the scenes' (traffic_scenes)
     if problem.scenes is not None:
         scenes, index, names, weather = recorded_scenes(
             problem.scenes, spec=predictor.spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
@@ -88,10 +89,21 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
                           weather=weather if problem.weather is None else Weather(**problem.weather))
 
 
+def _split_seed(seed: int) -> tuple[jax.Array, jax.Array]:
+    return tuple(jax.random.split(jax.random.PRNGKey(seed)))
+
+
+def seed_keys(seed: int) -> tuple[jax.Array, jax.Array]:
+    """(the scenes' key, the detection draws' key) of a problem's `seed`: `jax.random.split` of
+    `jax.random.PRNGKey(seed)`, bit for bit, as one compiled program that a warm run loads from
+    disk (done op by op, it is five small programs traced and lowered on every run)."""
+    return call(_split_seed, seed)
+
+
 def traffic_scenes(problem: Problem, spec, sensor, dtype) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
     """The problem's simulated scenes as a function of the traffic speed (`objective` evaluates
     them at the problem's own; `diffsense.sensitivity` differentiates them)."""
-    scene_key = jax.random.split(jax.random.PRNGKey(problem.seed))[0]
+    scene_key = seed_keys(problem.seed)[0]
     return speed_shifted_scenes(
         problem.scenarios, problem.variants, scene_key, spec=spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
         stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
@@ -242,7 +254,8 @@ def _optimise_line(problem: Problem, E: Objective | None, predictor: Any, figure
         r_star={name: float(result.r_star)}, E_hard_star=ev.e_hard(result.r_star),
         E_soft_star=float(result.E_soft_star), solve=result,
         programs_run={"solve": solve_counts, "figures": figure_counts},
-        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
+        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
+                "programs_lowered": clock.lowered},
         scenarios=tuple(E.scenario_names),
         config=_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
         flags=tuple(answer["flags"]), domain=domain, reference=report.reference_summary(ev, problem, result.r_star, on_hard),

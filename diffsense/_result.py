@@ -22,8 +22,10 @@ result.json schema (every key always present; non-finite numbers are written as 
     "evaluations"   {"objective": int, "gradient": int}  of the continuous solve (sweep excluded)
     "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...}}  compiled-program
                              runs (memoised points are not run again)
-    "wall_s"        {"compile": s, "run": s, "programs_compiled": n}  (n: programs XLA compiled
-                             rather than loaded from the persistent compilation cache)
+    "wall_s"        {"compile": s, "run": s, "programs_compiled": n, "programs_lowered": m}
+                             (n: programs XLA compiled rather than loaded from the persistent
+                             compilation cache; m: programs JAX traced and lowered, compiled or
+                             found in that cache, rather than loaded whole from executables/)
     "on_bound"      bool     r* is an end of the interval (then dr*/dtheta = 0)
     "bracket"       [lo, hi] where the continuous solve searched
     "tau_schedule"  [number, ...]  temperature multipliers of the continuation, largest first

@@ -93,7 +93,8 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         r_star=dict(box.x_star), E_hard_star=ev.e_hard(x), E_soft_star=float(box.E_soft), solve=None, box=box,
         reference=reference_summary(ev, problem, x, _on_hard(problem, E)),
         programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
-        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled},
+        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
+                "programs_lowered": clock.lowered},
         scenarios=tuple(E.scenario_names), config=_config(problem), domain=domain, box_notes=notes, **parts)
 
 

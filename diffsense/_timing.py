@@ -23,6 +23,7 @@ _registered = False
 
 
 _BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
+_LOWERING = "/jax/core/compile/jaxpr_to_mlir_module_duration"
 
 
 def _listener(event: str, duration_s: float, **_: object) -> None:
@@ -31,6 +32,7 @@ def _listener(event: str, duration_s: float, **_: object) -> None:
             clock.compile_s += duration_s
             # A program reached the backend: compiled, or loaded from the persistent cache.
             clock.backend_compiles += event == _BACKEND_COMPILE
+            clock.lowered += event == _LOWERING
 
 
 def _event_listener(event: str, **_: object) -> None:
@@ -47,6 +49,7 @@ class CompileClock:
         self.compile_s = 0.0
         self.backend_compiles = 0
         self.cache_hits = 0
+        self.lowered = 0
         self.total_s = 0.0
         self._t0 = 0.0
 

@@ -110,7 +110,7 @@ def speed_shifted_scenes(
 ) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
     """`simulate_scenes`'s results with the scenes as a `SpeedShiftedScenes` (its `base` the batch)."""
     configs = tuple(_scenario(name, background_vehicles) for name in scenarios)
-    keys = tuple(jax.random.fold_in(key, i) for i in range(len(configs)))
+    keys = call(_scenario_keys, key, len(configs))
     scenes, selections = [], []
     for scenario, k in zip(configs, keys):
         sim = simulate_scenario(scenario, variants, k, dtype=dtype, speed_offset_kmh=speed_offset_kmh)
@@ -153,9 +153,25 @@ def ground_truth_predictions(scenes: Scene, frames, fill: FillPolicy, predictor)
     return call(_ground_truth_predictions, scenes, tuple(int(f) for f in np.asarray(frames)), fill, predictor)
 
 
-@eqx.filter_jit
+def _scenario_keys(key: jax.Array, count: int) -> tuple[jax.Array, ...]:
+    """`jax.random.fold_in(key, i)` for each scenario i, as one program (`call` keeps it)."""
+    return tuple(jax.random.fold_in(key, i) for i in range(count))
+
+
+def _variant_draws(key: jax.Array, n: int, samples: int, shape: tuple[int, ...], dtype: str):
+    """(measurement-noise keys [n, 2], Monte-Carlo uniforms [n, samples, *shape]) of `key`, as
+    one program (`call` keeps it): op by op they were six small programs on every run."""
+    noise_key, mc_key = jax.random.split(key)
+    uniform = jax.vmap(lambda kk: mc_uniforms(kk, samples, shape, jnp.dtype(dtype)))(jax.random.split(mc_key, n))
+    return jax.random.split(noise_key, n), uniform
+
+
 def _true_futures(scenes: Scene, frames: tuple[int, ...], spec: InputSpec) -> jax.Array:
     """The target's true future at every instant of every variant: [N, I, F, 2] [m] (one program)."""
+    return call(_true_futures_program, scenes, frames, spec)
+
+
+def _true_futures_program(scenes: Scene, frames: tuple[int, ...], spec: InputSpec) -> jax.Array:
     return jax.vmap(lambda s: true_future(s, jnp.asarray(frames), spec))(scenes)
 
 
@@ -214,17 +230,15 @@ def make_objective(
     if not (np.isfinite(miss_penalty_m2) and miss_penalty_m2 >= 0):
         raise InputError(f"miss_penalty_m2 must be a finite number >= 0, got {miss_penalty_m2}")
     frames = np.asarray(frames, dtype=np.int32)
-    scenario = jnp.asarray(scenario, jnp.int32)
+    scenario = jax.device_put(np.asarray(scenario, np.int32))  # no program per host array
     n = scenario.shape[0]
     dtype = scenes.x_m.dtype
     key = jax.random.PRNGKey(0) if key is None else key
-    noise_key, mc_key = jax.random.split(key)
     # Random draws are made per real variant before any padding, so sharding never changes them.
-    noise_keys = jax.random.split(noise_key, n)
     k = estimator.samples if estimator.kind == "mc" else 0
-    uniform = jax.vmap(lambda kk: mc_uniforms(kk, k, scenes.x_m.shape[1:], dtype))(jax.random.split(mc_key, n))
+    noise_keys, uniform = call(_variant_draws, key, n, k, tuple(scenes.x_m.shape[1:]), jnp.dtype(dtype).name)
     fut = _true_futures(scenes, tuple(int(f) for f in frames), predictor.spec)
-    fixed = (scenes, scenario, jnp.ones((n,), dtype), noise_keys, uniform, fut)
+    fixed = (scenes, scenario, jax.device_put(np.ones((n,), dtype)), noise_keys, uniform, fut)
     if shard:
         fixed = shard_leading_axis(fixed, pad_weight_index=2)
     scenes, scenario, weight, noise_keys, uniform, fut = fixed

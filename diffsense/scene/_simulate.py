@@ -194,7 +194,8 @@ def simulate_scenario(
         key = jax.random.key(key)
     num_frames = round(cfg.duration_s / SCENE_DT_S) + 1
     nums = scenario_numbers(cfg, models, road, dtype)
-    nums = dataclasses.replace(nums, ego_speed_mps=nums.ego_speed_mps + jnp.asarray(speed_offset_kmh, dtype) / 3.6)
+    if not (isinstance(speed_offset_kmh, (int, float)) and speed_offset_kmh == 0):  # + 0 would be 3 programs
+        nums = dataclasses.replace(nums, ego_speed_mps=nums.ego_speed_mps + jnp.asarray(speed_offset_kmh, dtype) / 3.6)
     mobil = None
     if cfg.background.count and cfg.background.mobil:
         values = dataclasses.asdict(models.mobil)

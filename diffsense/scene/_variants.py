@@ -112,19 +112,30 @@ def scenario_numbers(cfg: ScenarioConfig, models: VehicleModels, road: Road, dty
     def f(a):  # numpy, then one transfer: no program per array (a traced road stays traced)
         return jnp.asarray(a, dtype) if isinstance(a, jax.core.Tracer) else jax.device_put(np.asarray(a, dtype))
 
+    def put(a, array_dtype):
+        return jax.device_put(np.asarray(a, array_dtype))
+
+    def lanes_d_m(lane):
+        if isinstance(road.lane_width_m, jax.core.Tracer):
+            return lane_centre_d_m(road, lane)
+        # lane_centre_d_m in numpy, in the float type JAX would compute it in: the same bits
+        # (an exact sum, then one rounded product), and no program
+        out = jax.eval_shape(lane_centre_d_m, road, np.asarray(lane)).dtype
+        return (np.asarray(lane) + 0.5).astype(out) * np.asarray(road.lane_width_m, out)
+
     return ScenarioNumbers(
         ego_s_m=f(rng(cfg.ego.s_m)), ego_speed_mps=f(rng(cfg.ego.speed_kmh, _KMH)),
         lc_start_s=f(rng(cfg.lane_change.start_s)), lc_duration_s=f(rng(cfg.lane_change.duration_s)),
         background_speed_mps=f(rng(bg.relative_speed_kmh, _KMH)),
         position_m=f([rng(sp.position_m) for sp in specs]),
         relative_speed_mps=f([rng(sp.relative_speed_kmh, _KMH) for sp in specs]),
-        nominal_kind=jnp.array([KIND_NAMES.index(k) for k in [cfg.ego.kind] + [sp.kind for sp in specs]], jnp.int32),
-        allowed_kind=jnp.array([[name in a for name in KIND_NAMES] for a in allowed]),
-        d_m=f(lane_centre_d_m(road, np.array(lanes))), target_ahead_of_lead=jnp.asarray(cfg.target_ahead_of == "lead"),
+        nominal_kind=put([KIND_NAMES.index(k) for k in [cfg.ego.kind] + [sp.kind for sp in specs]], np.int32),
+        allowed_kind=put([[name in a for name in KIND_NAMES] for a in allowed], bool),
+        d_m=f(lanes_d_m(lanes)), target_ahead_of_lead=put(cfg.target_ahead_of == "lead", bool),
         length_of=f([m.length_m for m in sizes]), width_of=f([m.width_m for m in sizes]),
         background_gap_m=f(bg.gap_m), background_spacing_m=f(bg.spacing_m),
-        background_d_m=f(lane_centre_d_m(road, i % lanes_here)), background_row=f(i // lanes_here),
-        background_kind=jnp.asarray(KIND_NAMES.index(bg.kind), jnp.int32),
+        background_d_m=f(lanes_d_m(i % lanes_here)), background_row=f(i // lanes_here),
+        background_kind=put(KIND_NAMES.index(bg.kind), np.int32),
         background_lane_change_s=f(bg.lane_change_duration_s),
     )
 

@@ -61,6 +61,10 @@ class Evaluator:
         self.reference_count = 0  # reference programs run (each K hard passes for a random law)
         self._progress = progress
 
+    def _array(self, values) -> np.ndarray:
+        # a host array: the compiled program takes it as it is (jnp.asarray would be a program)
+        return np.asarray(values, jax.dtypes.canonicalize_dtype(self.dtype))
+
     def _key(self, x) -> tuple[float, ...]:
         return tuple(float(v) for v in np.atleast_1d(np.asarray(x, dtype=np.float64)))
 
@@ -69,7 +73,7 @@ class Evaluator:
         key = (self._key(x), float(tau))
         if key not in self._soft:
             self.counts["soft"] += 1
-            v, g = call(_value_and_grad, self.objective, jnp.asarray(key[0], self.dtype), jnp.asarray(key[1], self.dtype))
+            v, g = call(_value_and_grad, self.objective, self._array(key[0]), self._array(key[1]))
             v, g = to_host((v, g))  # gathered from every process of a distributed run
             self._soft[key] = (float(v), np.asarray(g, np.float64))
             if self._progress:
@@ -81,7 +85,7 @@ class Evaluator:
         key = self._key(x)
         if key not in self._hard:
             self.counts["hard"] += 1
-            out = call(_hard, self.objective, jnp.asarray(key, self.dtype))
+            out = call(_hard, self.objective, self._array(key))
             self._hard[key] = to_host(out)
             if self._progress:
                 self._progress("hard", float(np.sqrt(max(float(self._hard[key].e2), 0.0))), 0.0)
@@ -110,7 +114,7 @@ class Evaluator:
                                                        draws=e2[None])
         if key not in self._reference:
             self.reference_count += 1
-            self._reference[key] = to_host(call(_reference, self.objective, jnp.asarray(key, self.dtype)))
+            self._reference[key] = to_host(call(_reference, self.objective, self._array(key)))
             if self._progress:
                 self._progress("reference", float(self._reference[key].e), 0.0)
         return self._reference[key]
@@ -135,7 +139,7 @@ class Evaluator:
         return self.value_and_grad(x, tau)[0]
 
     def detections(self, x, mode: str = "hard", tau: float = 1.0):
-        return call(_detections, self.objective, jnp.asarray(self._key(x), self.dtype), jnp.asarray(tau, self.dtype), mode)
+        return call(_detections, self.objective, self._array(self._key(x)), self._array(tau), mode)
 
     def host_value_and_grad(self, r: float, tau: float) -> tuple[float, float]:
         """(E^2, dE^2/dr) of a one-parameter objective as floats: `solve`'s `value_and_grad`."""

@@ -9,7 +9,6 @@ from typing import Any
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from diffsense.solve._bracketed import BracketedSecant
@@ -32,8 +31,9 @@ class Counted:
         self.objective = 0
         self.gradient = 0
 
-    def as_r(self, r: float) -> jax.Array:
-        return jnp.asarray(r, self.dtype)
+    def as_r(self, r: float) -> np.ndarray:
+        # a host scalar: programs take it as it is (jnp.asarray would be a program of its own)
+        return np.asarray(r, jax.dtypes.canonicalize_dtype(self.dtype))
 
     def on_grid(self, r: float) -> float:
         """r rounded to the nearest number of the solve's dtype (float32 solves stay float32)."""
@@ -82,7 +82,7 @@ def level_secant(counted, y0, tau, lower, upper, probe, tol, max_steps, budget):
     state = _secant_init(y, options)
     n = 0
     while n < budget and not (bool(state.done) or n >= max_steps):
-        g = jnp.asarray(counted.grad(float(y), tau), counted.dtype)
+        g = counted.as_r(counted.grad(float(y), tau))
         y, state = _secant_step(g, y, options, state)
         n += 1
     if bool(state.nonfinite):
