@@ -80,6 +80,8 @@ def cold_and_warm(model: str | None, variants: int, scenarios: str | None, repea
             content = json.loads((Path(out) / "result.json").read_text())
             rows.append({"run": label, "wall_s": wall, "compile_s": content["wall_s"]["compile"],
                          "run_s": content["wall_s"]["run"], "r_star": _r_star(content),
+                         "programs_compiled": content["wall_s"]["programs_compiled"],
+                         "programs_lowered": content["wall_s"].get("programs_lowered"),  # absent before f6558a2
                          "E_hard_star": content["E_hard_star"]})
     return rows
 
@@ -125,10 +127,12 @@ def solve_against_dense(problem, predictor, dense_step: float) -> tuple[object, 
 
 
 def print_processes(rows: list[dict]) -> None:
-    print(f"{'run':<34} {'wall s':>8} {'compile s':>10} {'run s':>8} {'r* deg':>8} {'E_hard m':>9}")
+    print(f"{'run':<34} {'wall s':>8} {'compile s':>10} {'run s':>8} {'compiled':>9} {'lowered':>8} "
+          f"{'r* deg':>8} {'E_hard m':>9}")
     for row in rows:
+        lowered = "-" if row["programs_lowered"] is None else str(row["programs_lowered"])
         print(f"{row['run']:<34} {row['wall_s']:8.1f} {row['compile_s']:10.1f} {row['run_s']:8.1f} "
-              f"{row['r_star']:8.2f} {row['E_hard_star']:9.4f}")
+              f"{row['programs_compiled']:>9} {lowered:>8} {row['r_star']:8.2f} {row['E_hard_star']:9.4f}")
 
 
 def print_solve_against_dense(out: dict) -> None:
