@@ -225,14 +225,17 @@ def new_model(maneuvers: bool, seed: int) -> CSLSTM:
     return nnx.merge(graphdef, _init_fn(maneuvers)(jax.random.key(seed)))
 
 
+@functools.lru_cache(maxsize=2)
 def _abstract(maneuvers: bool):
-    """(graphdef, state of shapes) of the network, traced without any arithmetic."""
+    """(graphdef, state of shapes) of the network, traced without any arithmetic, once per
+    variant (the trace is a JAX trace a warm run would otherwise pay at every weight load)."""
     return nnx.split(nnx.eval_shape(lambda: CSLSTM(maneuvers, rngs=nnx.Rngs(0))))
 
 
 def model_from_params(maneuvers: bool, params: dict) -> CSLSTM:
     """The network with the given parameter arrays (a pure dict shaped like `param_shapes`)."""
-    graphdef, state = _abstract(maneuvers)
+    graphdef, shapes = _abstract(maneuvers)
+    state = jax.tree.map(lambda leaf: leaf, shapes)  # a copy: the cached shapes stay as they are
     nnx.replace_by_pure_dict(state, jax.tree.map(jax.device_put, params))  # no program per array
     return nnx.merge(graphdef, state)
 
