@@ -42,7 +42,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("sensors", "tracks", "metrics", "solve", "predictors")
+PACKAGES = ("sensors", "tracks", "metrics", "solve", "predictors", "scene")
 
 
 # A mutant name pattern that matches no mutant: `mutmut run` with it generates the mutants and
