@@ -25,11 +25,15 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import jax
-import numpy as np
-
 from diffsense.solve._levels import Counted, e_from_e2, hard_polish_walk, level_bisection, level_secant
-from diffsense.solve._solve_config import RESERVE_PER_LEVEL, LevelResult, SolveConfig, SolveResult, outer_dtype
+from diffsense.solve._solve_config import (
+    RESERVE_PER_LEVEL,
+    LevelResult,
+    SolveConfig,
+    SolveResult,
+    host_array,
+    outer_dtype,
+)
 from diffsense.solve._steps import (
     SweepPoint,
     best_step,
@@ -78,13 +82,10 @@ def solve(
     taus = tuple(float(t) for t in config.tau_schedule)
     t0 = time.perf_counter()
     if sweep_points is None:
-        def host(v):  # a host scalar: jnp.asarray would be one more small program per run
-            return np.asarray(v, jax.dtypes.canonicalize_dtype(dtype))
-
         grid = check_steps(default_steps(lo, hi) if steps is None else steps, lo, hi)
         soft = ((lambda r, tau: value_and_grad(float(r), float(tau))[0]) if value_and_grad is not None
-                else (lambda r, tau: e2_soft(host(r), host(tau))))
-        sweep_points = sweep(lambda r: e_hard(host(r)), soft, grid, tau=taus[-1])
+                else (lambda r, tau: e2_soft(host_array(r, dtype), host_array(tau, dtype))))
+        sweep_points = sweep(lambda r: e_hard(host_array(r, dtype)), soft, grid, tau=taus[-1])
     sweep_points = tuple(sweep_points)
     t1 = time.perf_counter()
 

@@ -20,6 +20,7 @@ import numpy as np
 from diffsense._distributed import to_host
 from diffsense._executables import call
 from diffsense.metrics import ReferenceEvaluation, is_deterministic, value_and_grad
+from diffsense.solve._solve_config import host_array
 
 
 def _deterministic(objective: Any) -> bool:
@@ -62,8 +63,7 @@ class Evaluator:
         self._progress = progress
 
     def _array(self, values) -> np.ndarray:
-        # a host array: the compiled program takes it as it is (jnp.asarray would be a program)
-        return np.asarray(values, jax.dtypes.canonicalize_dtype(self.dtype))
+        return host_array(values, self.dtype)
 
     def _key(self, x) -> tuple[float, ...]:
         return tuple(float(v) for v in np.atleast_1d(np.asarray(x, dtype=np.float64)))

@@ -12,6 +12,7 @@ import jax
 import numpy as np
 
 from diffsense.solve._bracketed import BracketedSecant
+from diffsense.solve._solve_config import host_array
 
 def e_from_e2(e2: Any) -> float:
     return math.sqrt(max(float(e2), 0.0))
@@ -32,8 +33,7 @@ class Counted:
         self.gradient = 0
 
     def as_r(self, r: float) -> np.ndarray:
-        # a host scalar: programs take it as it is (jnp.asarray would be a program of its own)
-        return np.asarray(r, jax.dtypes.canonicalize_dtype(self.dtype))
+        return host_array(r, self.dtype)
 
     def on_grid(self, r: float) -> float:
         """r rounded to the nearest number of the solve's dtype (float32 solves stay float32)."""

@@ -8,6 +8,7 @@ from typing import Any, Literal
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from diffsense.errors import InputError
 from diffsense.solve._steps import SweepPoint
@@ -135,6 +136,13 @@ class SolveResult:
     def to_dict(self) -> dict[str, Any]:
         """A plain, JSON-ready dict of every field."""
         return dataclasses.asdict(self)
+
+
+def host_array(values: Any, dtype: Any) -> np.ndarray:
+    """`values` as a host array of JAX's form of `dtype` (float32 without x64): a compiled
+    program takes it as it is, where `jnp.asarray` would be a small program of its own, traced
+    and lowered on every run."""
+    return np.asarray(values, jax.dtypes.canonicalize_dtype(dtype))
 
 
 def outer_dtype(name: str) -> Any:
