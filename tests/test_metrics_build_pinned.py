@@ -124,7 +124,7 @@ def test_float32_objective_stays_float32_under_the_reference_draws(kind):
                        ToyPredictor(jnp.asarray(TOY_GAIN, jnp.float32)), names=("hfov_deg",),
                        estimator=EstimatorConfig(kind=kind, reference_draws=2), shard=False)
     # a float64 temperature (a solver's schedule under x64) is taken in float32 as well
-    value, grad = jax.value_and_grad(lambda h: E.e2({"hfov_deg": h}, jnp.float64(1.0)))(jnp.float32(10.0))
+    value, grad = jax.jit(jax.value_and_grad(lambda h: E.e2({"hfov_deg": h}, jnp.float64(1.0))))(jnp.float32(10.0))
     assert value.dtype == jnp.float32 and grad.dtype == jnp.float32
 
 
@@ -139,5 +139,6 @@ def test_float32_suite_objective_stays_float32_under_monte_carlo():
                        sensor.Suite((radar, sensor.Camera.from_toml())),
                        ToyPredictor(jnp.asarray(TOY_GAIN, jnp.float32)), names=("radar.hfov_deg",),
                        estimator=EstimatorConfig(kind="mc", samples=2), shard=False)
-    value, grad = jax.value_and_grad(lambda h: E.e2({"radar.hfov_deg": h}, jnp.float64(1.0)))(jnp.float32(10.0))
+    value, grad = jax.jit(jax.value_and_grad(lambda h: E.e2({"radar.hfov_deg": h}, jnp.float64(1.0))))(
+        jnp.float32(10.0))
     assert value.dtype == jnp.float32 and grad.dtype == jnp.float32
