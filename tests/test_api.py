@@ -61,10 +61,16 @@ def _value_and_grad(E, r, tau):
     return jax.value_and_grad(lambda r: E(r, tau=tau))(r)
 
 
+def _arrays(r):
+    """r's values as arrays: `eqx.filter_jit` bakes a Python float into the program, and every
+    finite-difference point would compile one of its own."""
+    return {k: jnp.asarray(v) for k, v in r.items()}
+
+
 def _central(E, r, name, h, tau=1.0):
     up, down = dict(r), dict(r)
     up[name], down[name] = r[name] + h, r[name] - h
-    return (float(_value(E, up, tau)) - float(_value(E, down, tau))) / (2 * h)
+    return (float(_value(E, _arrays(up), tau)) - float(_value(E, _arrays(down), tau))) / (2 * h)
 
 
 def test_problem_resolves_names_and_refuses_bad_input():
@@ -99,7 +105,7 @@ def test_problem_from_a_partial_toml(tmp_path):
 
 def test_dict_gradient_equals_central_differences_radar(radar):
     r = {"hfov_deg": 50.0, "range_m": 80.0}
-    value, grad = _value_and_grad(radar, r, 2.0)
+    value, grad = _value_and_grad(radar, _arrays(r), 2.0)
     assert set(grad) == set(r) and np.isfinite(float(value))
     for name, h in (("hfov_deg", 1e-3), ("range_m", 1e-3)):
         np.testing.assert_allclose(float(grad[name]), _central(radar, r, name, h, tau=2.0), rtol=1e-5, atol=1e-10)
@@ -110,7 +116,7 @@ def test_dict_gradient_equals_central_differences_camera(random_cslstm):
                          predictor=random_cslstm, prediction_stride_frames=20, predictor_dtype="float64")
     E = ds.objective(problem)
     r = {"hfov_deg": 70.0}
-    _, grad = _value_and_grad(E, r, 2.0)
+    _, grad = _value_and_grad(E, _arrays(r), 2.0)
     np.testing.assert_allclose(float(grad["hfov_deg"]), _central(E, r, "hfov_deg", 1e-3, tau=2.0),
                                rtol=1e-5, atol=1e-10)
 

@@ -69,11 +69,15 @@ def test_problem_default_computes_the_predictor_in_float32(objectives):
     assert e32.dtype == e64.dtype == jnp.float64
 
 
+# At module level: compiled once for every case (a lambda made in the test is a new program each time).
+_vg = eqx.filter_jit(lambda E, r: jax.value_and_grad(lambda x: E({"hfov_deg": x}))(r))
+_value = eqx.filter_jit(lambda E, r: E({"hfov_deg": r}))
+
+
 @pytest.mark.parametrize("hfov", [32.0, 50.0, 120.0])
 def test_float32_predictor_value_and_gradient_match_float64_finite_differences(objectives, hfov):
     e32, e64 = objectives
-    vg = eqx.filter_jit(lambda E, r: jax.value_and_grad(lambda x: E({"hfov_deg": x}))(r))
-    value = eqx.filter_jit(lambda E, r: E({"hfov_deg": r}))
+    vg, value = _vg, _value
     v32, g32 = vg(e32, jnp.asarray(hfov))
     v64, g64 = vg(e64, jnp.asarray(hfov))
     assert v32.dtype == jnp.float64 and g32.dtype == jnp.float64

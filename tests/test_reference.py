@@ -34,8 +34,11 @@ def radar_objective(radar=SWERLING, key=None, draws=4, n=1, kind="mean-field", *
                           key=key, estimator=EstimatorConfig(kind=kind, reference_draws=draws, **knobs), shard=False)
 
 
-reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))
-hard = eqx.filter_jit(lambda o, r: o({H: r}, mode="hard"))
+_reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))
+_hard = eqx.filter_jit(lambda o, r: o({H: r}, mode="hard"))
+# r as an array: `eqx.filter_jit` bakes a Python float into the program (one compile per point)
+reference = lambda o, r: _reference(o, jnp.asarray(r))
+hard = lambda o, r: _hard(o, jnp.asarray(r))
 
 
 @pytest.fixture(scope="module")
@@ -122,7 +125,7 @@ def test_other_draw_indices_are_independent_draws_of_the_same_scene(swerling):
     # E_ref's own draws are indices 0 ... K-1; indices from K on are fresh draws of the same scene,
     # so a block of 2K draws is the mean of the two K-blocks, and the default is the first block.
     on = eqx.filter_jit(lambda o, r, ids: o.reference({H: r}, draws=ids))
-    own, fresh, both = (on(swerling, 8.0, jnp.arange(a, b)) for a, b in ((0, 4), (4, 8), (0, 8)))
+    own, fresh, both = (on(swerling, jnp.asarray(8.0), jnp.arange(a, b)) for a, b in ((0, 4), (4, 8), (0, 8)))
     np.testing.assert_array_equal(np.asarray(own.draws), np.asarray(reference(swerling, 8.0).draws))
     np.testing.assert_array_equal(np.asarray(both.draws), np.concatenate([np.asarray(own.draws), np.asarray(fresh.draws)]))
     assert not np.array_equal(np.asarray(fresh.draws), np.asarray(own.draws))

@@ -234,13 +234,15 @@ def test_mc_draws_each_member_on_its_own():
             total = total + obj._question(obj._predict(det), p_tracked(obj._target_window(det)))
         return total / 6, us
 
-    expected, us = by_hand(mc, R_EDGE, 1.0)
+    # tau as an array: one program for both temperatures (a Python float is baked in)
+    expected, us = by_hand(mc, R_EDGE, jnp.asarray(1.0))
     assert len(us) == 2 and not np.allclose(np.asarray(us[0]), np.asarray(us[1]))  # independent members
-    got = eqx.filter_jit(lambda o, v: o.e2(_r(v)))(mc, R_EDGE)
+    e2 = eqx.filter_jit(lambda o, v, tau: o.e2(_r(v), tau))
+    got = e2(mc, R_EDGE, jnp.asarray(1.0))
     np.testing.assert_allclose(float(got), float(expected), rtol=1e-9)
     # the temperature multiplier reaches the members' gates (a warm one changes the draws' p)
-    warm, _ = by_hand(mc, R_EDGE, 20.0)
-    got = eqx.filter_jit(lambda o, v: o.e2(_r(v), 20.0))(mc, R_EDGE)
+    warm, _ = by_hand(mc, R_EDGE, jnp.asarray(20.0))
+    got = e2(mc, R_EDGE, jnp.asarray(20.0))
     np.testing.assert_allclose(float(got), float(warm), rtol=1e-9)
     assert abs(float(warm) - float(expected)) > 1e-6 * abs(float(expected))
 
