@@ -36,9 +36,14 @@ def radar_objective(radar=SWERLING, key=None, draws=4, n=1, kind="mean-field", *
 
 _reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))
 _hard = eqx.filter_jit(lambda o, r: o({H: r}, mode="hard"))
-# r as an array: `eqx.filter_jit` bakes a Python float into the program (one compile per point)
+_e2 = eqx.filter_jit(lambda o, r, tau: o.e2({H: r}, tau))
+_value_and_grad = eqx.filter_jit(lambda o, r, tau: jax.value_and_grad(lambda x: o.e2({H: x}, tau))(r))
+# r and tau go in as arrays: `eqx.filter_jit` bakes a Python float into the program, one compile
+# per point; as arrays, one per objective. Shared with the estimators' tests.
 reference = lambda o, r: _reference(o, jnp.asarray(r))
 hard = lambda o, r: _hard(o, jnp.asarray(r))
+e2 = lambda o, r, tau: _e2(o, jnp.asarray(r), jnp.asarray(tau))
+value_and_grad = lambda o, r, tau: _value_and_grad(o, jnp.asarray(r), jnp.asarray(tau))
 
 
 @pytest.fixture(scope="module")

@@ -12,15 +12,8 @@ import pytest
 from diffsense import metrics
 from diffsense import sensors as sensor
 from diffsense.metrics._estimators import straight_through
-from tests.test_reference import H, radar_objective
+from tests.test_reference import H, e2, radar_objective, reference, value_and_grad
 
-# r and tau go in as arrays: one compiled program per objective, not one per value.
-_e2 = eqx.filter_jit(lambda o, r, tau: o.e2({H: r}, tau))
-_reference = eqx.filter_jit(lambda o, r: o.reference({H: r}))
-_value_and_grad = eqx.filter_jit(lambda o, r, tau: jax.value_and_grad(lambda x: o.e2({H: x}, tau))(r))
-e2 = lambda o, r, tau: _e2(o, jnp.asarray(r), jnp.asarray(tau))
-reference = lambda o, r: _reference(o, jnp.asarray(r))
-value_and_grad = lambda o, r, tau: _value_and_grad(o, jnp.asarray(r), jnp.asarray(tau))
 DRAWS = 4
 
 
