@@ -21,13 +21,29 @@ def objective():
     return toy_objective(fill="hold")
 
 
+_e2 = eqx.filter_jit(lambda o, r, t: o.e2({R: r}, t))
+
+
 def e2(obj, r, tau=1.0):
-    return float(eqx.filter_jit(lambda o, r, t: o.e2({R: r}, t))(obj, r, tau))
+    """Soft E^2 at r, compiled once per objective: r and tau go in as arrays (a Python float
+    under `eqx.filter_jit` would be baked in, one program per point)."""
+    return float(_e2(obj, jnp.asarray(r), jnp.asarray(tau)))
+
+
+_hard = eqx.filter_jit(lambda o, r: o({R: r}, mode="hard"))
+
+
+def hard(obj, r):
+    """Hard E at r, compiled once per objective."""
+    return float(_hard(obj, jnp.asarray(r)))
+
+
+_hard_evaluation = eqx.filter_jit(lambda o, r: o.hard({R: r}))
 
 
 def test_blind_sensor_is_penalised(objective):
-    blind = float(objective({R: 0.5}, mode="hard"))
-    seeing = float(objective({R: 150.0}, mode="hard"))
+    blind = hard(objective, 0.5)
+    seeing = hard(objective, 150.0)
     assert blind > seeing > 0.0
     assert np.isfinite(blind)
 
@@ -35,7 +51,7 @@ def test_blind_sensor_is_penalised(objective):
 def test_gradient_matches_central_differences(objective):
     vg = eqx.filter_jit(lambda o, r: jax.value_and_grad(lambda x: o.e2({R: x}))(r))
     for r in (30.0, 55.0):
-        value, grad = vg(objective, r)
+        value, grad = vg(objective, jnp.asarray(r))
         h = 1e-4
         fd = (e2(objective, r + h) - e2(objective, r - h)) / (2 * h)
         assert np.isfinite(float(grad))
@@ -68,9 +84,9 @@ def test_unknown_parameter_is_one_line(objective):
 
 def test_soft_tends_to_hard_as_temperature_shrinks(objective):
     r = 47.3
-    hard = float(objective({R: r}, mode="hard")) ** 2
-    gaps = [abs(e2(objective, r, tau) - hard) for tau in (1.0, 0.1, 1e-3)]
-    assert gaps[-1] < 1e-6 * max(hard, 1.0)
+    hard_e2 = hard(objective, r) ** 2
+    gaps = [abs(e2(objective, r, tau) - hard_e2) for tau in (1.0, 0.1, 1e-3)]
+    assert gaps[-1] < 1e-6 * max(hard_e2, 1.0)
     assert gaps[-1] <= gaps[0]
 
 
@@ -90,22 +106,22 @@ def test_evaluator_memoises_counts_and_matches_the_module(objective):
     r = jnp.asarray(44.0)
     assert float(jax.jit(e2_soft)(r, 2.0)) == value
     assert float(jax.jit(jax.grad(e2_soft))(r, 2.0)) == grad[0]
-    assert e_hard(r) == ev.e_hard(44.0) == pytest.approx(float(objective({R: 44.0}, mode="hard")), rel=1e-12)
+    assert e_hard(r) == ev.e_hard(44.0) == pytest.approx(hard(objective, 44.0), rel=1e-12)
     assert ev.counts == {"soft": 1, "hard": 1}
 
 
 def test_hard_evaluation_carries_its_detections(objective):
     # The record the main job's detections figure reads: the 0/1 detections that produced E_hard,
     # equal to the module's own hard detections, and more of them at a longer range.
-    near, far = objective.hard({R: 20.0}), objective.hard({R: 150.0})
-    det = objective.detections({R: 20.0}, "hard").p_detect
+    near, far = _hard_evaluation(objective, jnp.asarray(20.0)), _hard_evaluation(objective, jnp.asarray(150.0))
+    det = eqx.filter_jit(lambda o: o.detections({R: 20.0}, "hard").p_detect)(objective)
     np.testing.assert_array_equal(np.asarray(near.p_detect), np.asarray(det))
     assert set(np.unique(np.asarray(near.p_detect))) <= {0.0, 1.0}
     assert float(np.sum(far.p_detect)) > float(np.sum(near.p_detect))
 
 
 def test_horizon_rmse_shapes_and_growth(objective):
-    h = objective.hard({R: 30.0})
+    h = _hard_evaluation(objective, jnp.asarray(30.0))
     assert h.rmse_gt.shape == (2, 25) and h.rmse_sensor.shape == (2, 25)
     assert np.all(np.isfinite(h.rmse_gt)) and np.all(np.isfinite(h.rmse_sensor))
     assert h.rmse_sensor[:, -1].mean() > h.rmse_sensor[:, 0].mean()

@@ -17,8 +17,6 @@ from diffsense.metrics._estimators import relaxed_draw
 from diffsense.sensors._laws import CameraDetection, RadarDetection
 from tests.test_reference import H, e2, radar_objective, reference, value_and_grad
 
-
-
 @pytest.fixture(scope="module")
 def relaxed():
     return radar_objective(kind="relaxed-reference", draws=4)
