@@ -16,11 +16,11 @@ jax.config.update("jax_enable_x64", True)
 # (`main([...])`) would otherwise switch it on for every later test of the session, which then
 # depends on whatever other runs left there. The tests of the cache give it a folder of their own.
 os.environ.setdefault("DIFFSENSE_NO_CACHE", "1")
-# The session keeps its own cache instead, in a fresh temporary folder (removed at exit): the
-# programs a test module compiles are dropped after it (below), and the next module that builds
-# the same objective would compile them again. Only programs that take a second or more to
-# compile are written (JAX's default), so small programs, such as the clock test's, are always
-# compiled afresh.
+# The session keeps its own cache instead, in a fresh temporary folder (removed when the session
+# ends, unless a signal kills it): the programs a test module compiles are dropped after it
+# (below), and the next module that builds the same objective would compile them again. Only
+# programs that take a second or more to compile are written (JAX's default), so small programs,
+# such as the clock test's, are always compiled afresh.
 _SESSION_CACHE = tempfile.TemporaryDirectory(prefix="diffsense-test-jax-cache-")
 jax.config.update("jax_compilation_cache_dir", _SESSION_CACHE.name)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
