@@ -10,6 +10,8 @@ ahead of its centre) to such a vehicle's body, widened laterally by margin_m.
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -162,17 +164,28 @@ def test_a_history_window_runs_from_history_s_before_the_instant_to_the_instant(
     assert _mask(one)[2]  # no instants given: every frame counts
 
 
+def test_traced_instants_give_the_same_windows():
+    one = _pair(0.0, 9.15, 2)
+    one["s_m"][0, :, 2] = -1000.0
+    one["s_m"][0, 10, 2] = 110.0
+    args = dict(history_s=2.0, grid_half_length_m=30.0, sensor_reach_m=4.0, margin_m=2.0)
+    traced = jax.jit(lambda sc, f: relevant_mask(sc, f, **args))
+    for instant, kept in [(30, True), (31, False), (9, False)]:
+        assert np.asarray(traced(_scene(one), jnp.asarray([instant])))[0, 2] == kept
+        assert _mask(one, [instant], history_s=2.0)[2] is kept
+
+
 def test_an_absent_vehicle_is_never_kept_even_in_the_grid():
     one = _pair(110.0, 9.15, 2)
     one["present"][0, 2] = False
     assert _mask(one) == [True, True] + [False] * (V - 2)
 
 
-def _occlusion(s_k: float, d_k: float, *, reach=4.0, margin=2.0) -> bool:
+def _occlusion(s_k: float, d_k: float, *, ego_d=5.5, s_target=100.0) -> bool:
     """Whether vehicle 2 at (s_k, d_k), 4 m x 2 m, is kept as a possible occluder of the target
     (at s = 100, d = 5.5) seen from the ego (at s = 0, d = 5.5): box s in [-2, 102], d in [2.5, 8.5]."""
-    one = _pair(s_k, d_k, 3, ego_s=0.0, ego_d=5.5)
-    return _mask(one, sensor_reach_m=reach, margin_m=margin, grid_half_length_m=1.0)[2]
+    one = _pair(s_k, d_k, 3, ego_s=0.0, ego_d=ego_d, s_target=s_target)
+    return _mask(one, sensor_reach_m=4.0, margin_m=2.0, grid_half_length_m=1.0)[2]
 
 
 @pytest.mark.parametrize("s_k, d_k, kept", [
@@ -190,6 +203,20 @@ def test_an_occluder_is_a_body_strictly_overlapping_the_widened_box(s_k, d_k, ke
     assert _occlusion(s_k, d_k) is kept
 
 
+@pytest.mark.parametrize("s_k, d_k, kept", [
+    (-103.9, 8.0, True),    # 0.1 m into the box from its rear, the target's rear at s = -102
+    (-104.0, 8.0, False),
+])
+def test_the_box_runs_from_the_rear_of_a_target_behind_the_ego(s_k, d_k, kept):
+    assert _occlusion(s_k, d_k, s_target=-100.0) is kept
+
+
+@pytest.mark.parametrize("d_k, kept", [(1.6, True), (1.5, False), (13.1, True), (13.2, False)])
+def test_the_box_spans_the_right_side_of_a_target_right_of_the_ego(d_k, kept):
+    # The ego in lane 2 (d = 9.15), the target in lane 1 (d = 5.5): box d in [2.5, 12.15].
+    assert _occlusion(50.0, d_k, ego_d=9.15) is kept
+
+
 def test_the_box_reaches_sensor_reach_ahead_of_the_ego():
     # The target 100 m ahead is behind the ego here (s = -100): the box runs from the target's rear
     # to the ego's sensors, sensor_reach_m ahead of its centre.
@@ -200,11 +227,12 @@ def test_the_box_reaches_sensor_reach_ahead_of_the_ego():
 
 
 def test_selection_keeps_the_relevant_in_order_then_pads_and_the_pads_sit_behind_the_ego():
-    fields = _random_batch(1)
-    args = dict(history_s=1.0, grid_half_length_m=29.718, sensor_reach_m=4.2)
-    frames = jnp.asarray([12, 30])
+    fields = _random_batch(2)
+    args = dict(history_s=0.5, grid_half_length_m=29.718, sensor_reach_m=4.2)
+    frames = jnp.asarray([5])
     scene = _scene(fields)
     mask = np.asarray(relevant_mask(scene, frames, **args))
+    assert not np.array_equal(mask, np.asarray(relevant_mask(scene, **args)))  # the instant matters here
     order, keep = relevant_selection(scene, frames, **args)
     width = mask.sum(axis=1).max()
     assert order.shape == keep.shape == (N, width) and width < V
@@ -238,7 +266,7 @@ def test_selection_keeps_the_relevant_in_order_then_pads_and_the_pads_sit_behind
 def test_one_scene_gives_one_selection_and_one_scene_back():
     fields = _one(_random_batch(2), 3)
     args = dict(history_s=3.0, grid_half_length_m=29.718, sensor_reach_m=4.2)
-    scene = _scene(fields)
+    scene = dataclasses.replace(_scene(fields), dt_s=0.2)  # every frame searched: dt_s changes no window
     order, keep = relevant_selection(scene, **args)
     assert order.ndim == keep.ndim == 1 and keep.all()
     expected = _by_hand(fields, None, 3.0, 29.718, 4.2, MARGIN_M)
@@ -248,3 +276,4 @@ def test_one_scene_gives_one_selection_and_one_scene_back():
     np.testing.assert_array_equal(np.asarray(out.s_m), fields["s_m"][:, order])
     traced = jax.jit(select_vehicles)(scene, jnp.asarray(order), jnp.asarray(keep))
     np.testing.assert_array_equal(np.asarray(traced.d_m), fields["d_m"][:, order])
+    assert out.dt_s == traced.dt_s == 0.2  # the selection keeps the scene's frame period

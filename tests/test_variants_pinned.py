@@ -226,3 +226,12 @@ def test_a_traced_lane_width_gives_the_same_numbers():
     wider = jax.jit(with_width)(jnp.asarray(4.0))
     np.testing.assert_allclose(wider.d_m, (np.array([2, 3, 2, 3, 4]) + 0.5) * 4.0, rtol=1e-15)
     np.testing.assert_allclose(wider.background_d_m, (np.arange(8) % 6 + 0.5) * 4.0, rtol=1e-15)
+
+
+def test_a_float32_plan_stays_float32_with_its_background():
+    cfg = replace(load_scenario("sc01"), background={"count": 4})
+    keys = jax.random.split(jax.random.key(0), 2)
+    plan = _plans(_numbers(cfg, jnp.float32), keys, jnp.array([True, False]))
+    for name in ("s_m", "speed_mps", "d_from_m", "d_to_m", "lc_start_s", "lc_duration_s", "length_m", "width_m"):
+        assert getattr(plan, name).dtype == jnp.float32 and getattr(plan, name).shape == (2, 9), name
+    assert plan.kind.dtype == plan.role.dtype == jnp.int32
