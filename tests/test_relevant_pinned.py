@@ -64,7 +64,7 @@ def _by_hand(sc: dict, frames, history_s, grid_half_length_m, sensor_reach_m, ma
     return [bool((core[v] or occluder[v] or v == 0) and present[v]) for v in range(V)]
 
 
-def _random_batch(seed: int) -> dict:
+def _random_batch(seed: int, V: int = V) -> dict:  # noqa: N803
     """N scenes of V vehicles over T frames at 10 Hz on a straight road, some changing lanes."""
     rng = np.random.default_rng(seed)
     t = np.arange(T)[None, :, None] * 0.1
@@ -228,11 +228,12 @@ def test_the_box_reaches_sensor_reach_ahead_of_the_ego():
 
 def test_selection_keeps_the_relevant_in_order_then_pads_and_the_pads_sit_behind_the_ego():
     fields = _random_batch(2)
-    args = dict(history_s=0.5, grid_half_length_m=29.718, sensor_reach_m=4.2)
+    args = dict(history_s=0.5, grid_half_length_m=29.718, sensor_reach_m=4.2, margin_m=3.0)
     frames = jnp.asarray([5])
     scene = _scene(fields)
     mask = np.asarray(relevant_mask(scene, frames, **args))
     assert not np.array_equal(mask, np.asarray(relevant_mask(scene, **args)))  # the instant matters here
+    assert not np.array_equal(mask, np.asarray(relevant_mask(scene, frames, **(args | {"margin_m": MARGIN_M}))))
     order, keep = relevant_selection(scene, frames, **args)
     width = mask.sum(axis=1).max()
     assert order.shape == keep.shape == (N, width) and width < V
@@ -277,3 +278,18 @@ def test_one_scene_gives_one_selection_and_one_scene_back():
     traced = jax.jit(select_vehicles)(scene, jnp.asarray(order), jnp.asarray(keep))
     np.testing.assert_array_equal(np.asarray(traced.d_m), fields["d_m"][:, order])
     assert out.dt_s == traced.dt_s == 0.2  # the selection keeps the scene's frame period
+
+
+def test_a_long_vehicle_axis_keeps_the_relevant_in_their_order():
+    # 48 vehicles: past the 16 elements below which numpy's default (unstable) sort is an
+    # insertion sort, so only a stable sort keeps the kept vehicles in their order.
+    fields = _random_batch(4, V=48)
+    args = dict(history_s=3.0, grid_half_length_m=29.718, sensor_reach_m=4.2)
+    scene = _scene(fields)
+    mask = np.asarray(relevant_mask(scene, **args))
+    order, keep = relevant_selection(scene, **args)
+    assert mask.sum(axis=1).min() > 16
+    for n in range(N):
+        kept = np.flatnonzero(mask[n])
+        assert order[n, :len(kept)].tolist() == kept.tolist() and keep[n, :len(kept)].all()
+        assert not keep[n, len(kept):].any()
