@@ -235,3 +235,17 @@ def test_a_float32_plan_stays_float32_with_its_background():
     for name in ("s_m", "speed_mps", "d_from_m", "d_to_m", "lc_start_s", "lc_duration_s", "length_m", "width_m"):
         assert getattr(plan, name).dtype == jnp.float32 and getattr(plan, name).shape == (2, 9), name
     assert plan.kind.dtype == plan.role.dtype == jnp.int32
+
+
+def test_a_target_ahead_of_the_ego_is_placed_from_the_egos_front_whatever_its_kind():
+    # sc01's target draws car or van; its rear is position_m ahead of the ego's front.
+    d = _Drawn(load_scenario("sc01"), count=1000)
+    assert set(np.unique(d.p.kind[:, 1])) == {KIND_ID["car"], KIND_ID["van"]}
+    _uniform(d.gap_t, d.cfg.target.position_m.low, d.cfg.target.position_m.high, d.count)
+
+
+def test_a_single_background_vehicle_is_in_the_plan():
+    cfg = replace(load_scenario("sc01"), background={"count": 1})
+    p = jax.tree.map(lambda a: a[0], _draw(cfg, 1, True))
+    assert p.s_m.shape == (6,) and p.role.tolist() == [0, 1, 2, 3, 4, BACKGROUND]
+    np.testing.assert_allclose(p.s_m[5], 60.0 - 2.3 - 150.0 - 2.3, rtol=0, atol=1e-12)
