@@ -215,17 +215,19 @@ def test_numbers_are_arrays_in_the_type_asked_for(dtype):
     np.testing.assert_array_equal(nums.d_m, np.asarray(lane_centre_d_m(road, jnp.asarray(lanes))).astype(dtype))
 
 
-def test_a_traced_lane_width_gives_the_same_numbers():
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_a_traced_lane_width_gives_the_same_numbers(dtype):
     cfg = replace(load_scenario("sc01"), background={"count": 8})
     models, road = load_vehicle_models(), load_road("us101")
-    plain = scenario_numbers(cfg, models, road, jnp.float64)
-    with_width = lambda w: scenario_numbers(cfg, models, dataclasses.replace(road, lane_width_m=w), jnp.float64)
+    plain = scenario_numbers(cfg, models, road, dtype)
+    with_width = lambda w: scenario_numbers(cfg, models, dataclasses.replace(road, lane_width_m=w), dtype)
     traced = jax.jit(with_width)(road.lane_width_m)
     for a, b in zip(jax.tree.leaves(plain), jax.tree.leaves(traced)):
+        assert a.dtype == b.dtype
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     wider = jax.jit(with_width)(jnp.asarray(4.0))
-    np.testing.assert_allclose(wider.d_m, (np.array([2, 3, 2, 3, 4]) + 0.5) * 4.0, rtol=1e-15)
-    np.testing.assert_allclose(wider.background_d_m, (np.arange(8) % 6 + 0.5) * 4.0, rtol=1e-15)
+    np.testing.assert_allclose(wider.d_m, (np.array([2, 3, 2, 3, 4]) + 0.5) * 4.0, rtol=1e-7)
+    np.testing.assert_allclose(wider.background_d_m, (np.arange(8) % 6 + 0.5) * 4.0, rtol=1e-7)
 
 
 def test_a_float32_plan_stays_float32_with_its_background():
