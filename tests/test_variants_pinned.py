@@ -251,3 +251,16 @@ def test_a_single_background_vehicle_is_in_the_plan():
     p = jax.tree.map(lambda a: a[0], _draw(cfg, 1, True))
     assert p.s_m.shape == (6,) and p.role.tolist() == [0, 1, 2, 3, 4, BACKGROUND]
     np.testing.assert_allclose(p.s_m[5], 60.0 - 2.3 - 150.0 - 2.3, rtol=0, atol=1e-12)
+
+
+def test_a_float32_roads_lane_centres_carry_the_bits_jax_computes():
+    # On a float32 road JAX computes a lane centre in float32, (k + 0.5) * 3.66f, which is not the
+    # float64 product rounded to float32 for lanes 2 and 4 (9.1499996 against 9.1500006).
+    road = jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a,
+                        load_road("us101"))
+    cfg = replace(load_scenario("sc01"), background={"count": 6})
+    nums = scenario_numbers(cfg, load_vehicle_models(), road, jnp.float32)
+    lanes = np.array([2, 3, 2, 3, 4])
+    np.testing.assert_array_equal(nums.d_m, np.asarray(lane_centre_d_m(road, jnp.asarray(lanes))))
+    np.testing.assert_array_equal(nums.background_d_m, np.asarray(lane_centre_d_m(road, jnp.arange(6))))
+    assert not np.array_equal(nums.d_m, ((lanes + 0.5) * 3.66).astype(np.float32))
