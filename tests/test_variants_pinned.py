@@ -230,12 +230,14 @@ def test_a_traced_lane_width_gives_the_same_numbers(dtype):
     np.testing.assert_allclose(wider.background_d_m, (np.arange(8) % 6 + 0.5) * 4.0, rtol=1e-7)
 
 
-def test_a_float32_plan_stays_float32_with_its_background():
-    cfg = replace(load_scenario("sc01"), background={"count": 4})
+@pytest.mark.parametrize("background", [0, 4])
+def test_a_float32_plan_stays_float32(background):
+    cfg = replace(load_scenario("sc01"), background={"count": background})
     keys = jax.random.split(jax.random.key(0), 2)
     plan = _plans(_numbers(cfg, jnp.float32), keys, jnp.array([True, False]))
     for name in ("s_m", "speed_mps", "d_from_m", "d_to_m", "lc_start_s", "lc_duration_s", "length_m", "width_m"):
-        assert getattr(plan, name).dtype == jnp.float32 and getattr(plan, name).shape == (2, 9), name
+        assert getattr(plan, name).dtype == jnp.float32, name
+        assert getattr(plan, name).shape == (2, 5 + background), name
     assert plan.kind.dtype == plan.role.dtype == jnp.int32
 
 
