@@ -178,3 +178,24 @@ def test_initialisation_is_uniform_in_one_over_root_fan_in():
     assert conv.kernel.shape == (3, 3, 64, 16) and conv.bias.shape == (16,) and lstm.hidden == 100
     b = np.asarray(lstm.b_ih[...])
     assert not np.array_equal(b, np.asarray(lstm.b_hh[...]))  # two biases, each its own draw
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class _Bits:
+    """A predictor whose every output is the bit width of the floats it was handed."""
+
+    spec = CSLSTM_SPEC
+
+    def __call__(self, inputs: PredictorInputs):
+        assert inputs.nbr_slot.dtype == jnp.int32
+        bits = jnp.finfo(inputs.hist.dtype).bits
+        assert jnp.finfo(inputs.nbr_hist.dtype).bits == jnp.finfo(inputs.nbr_weight.dtype).bits == bits
+        return jnp.full((inputs.hist.shape[0], 25, 2), bits, inputs.hist.dtype)
+
+
+@pytest.mark.parametrize("given, inside", [(jnp.float32, "float64"), (jnp.float64, "float32"),
+                                           (jnp.float32, "float32"), (jnp.float64, "float64")])
+def test_every_float_input_is_cast_to_the_compute_dtype_whatever_it_was(given, inside):
+    out = with_compute_dtype(_Bits(), inside)(_inputs(given))
+    assert out.dtype == given and np.all(np.asarray(out) == {"float32": 32, "float64": 64}[inside])
