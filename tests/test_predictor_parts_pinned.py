@@ -56,6 +56,8 @@ def test_a_spec_with_an_empty_or_non_positive_field_is_refused(field, value):
         dataclasses.replace(CSLSTM_SPEC, **{field: value})
     ok = dataclasses.replace(CSLSTM_SPEC, history_points=1, future_points=1, grid_cells=1, grid_lanes=1)
     assert ok.history_s == 0.0 and ok.grid_size == 1
+    slow = dataclasses.replace(CSLSTM_SPEC, rate_hz=0.5, grid_cell_m=0.5)  # below 1 but positive: fine
+    assert slow.future_s == 50.0 and slow.grid_half_length_m == 3.25
 
 
 @jax.tree_util.register_dataclass
