@@ -35,6 +35,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from diffsense import _random
+
 Estimator = Literal["auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard"]
 ESTIMATORS: tuple[str, ...] = ("auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard")
 
@@ -94,7 +96,7 @@ def relaxed_bernoulli(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temper
 def mc_uniforms(key: Array, samples: int, shape: tuple[int, ...], dtype) -> Float[Array, "K *S"]:
     """The fixed uniform draws of the Monte-Carlo estimator, strictly inside (0, 1)."""
     tiny = jnp.finfo(dtype).eps
-    return jax.random.uniform(key, (samples, *shape), dtype=dtype, minval=tiny, maxval=1.0 - tiny)
+    return _random.uniform(key, (samples, *shape), dtype, tiny, 1.0 - tiny)
 
 
 def relaxed_draw(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temperature: Array) -> Float[Array, "*S"]:

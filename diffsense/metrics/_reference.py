@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from diffsense import _random
 from diffsense.metrics._estimators import _clipped_logit  # the relaxed draw's clipping
 from diffsense.sensors import Suite
 from diffsense.sensors._datatypes import Detections
@@ -93,7 +94,7 @@ def reference_uniforms(noise_key: Array, draw: Array, shape: tuple[int, ...], dt
         stream = jax.random.fold_in(jax.random.fold_in(key, stream_id), draw)
         if member is not None:
             stream = jax.random.fold_in(stream, member)
-        return jax.random.uniform(stream, shape, dtype=dtype)
+        return _random.uniform(stream, shape, dtype)
 
     return jax.vmap(one)(noise_key)
 

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from diffsense import _random
 from diffsense.errors import InputError
 from diffsense.scene import EGO_INDEX, Scene
 from diffsense.sensors._weather import CLEAR
@@ -32,10 +33,10 @@ def measurement_noise(key: PRNGKeyArray, scene: Scene) -> Float[Array, "*N 2 T V
     """
     shape, dtype = scene.x_m.shape, scene.x_m.dtype
     if len(shape) == 2:
-        return jax.random.normal(key, (2, *shape), dtype=dtype)
+        return _random.normal(key, (2, *shape), dtype)
     if len(shape) == 3:
         keys = jax.vmap(lambda n: jax.random.fold_in(key, n))(jnp.arange(shape[0]))
-        return jax.vmap(lambda k: jax.random.normal(k, (2, *shape[1:]), dtype=dtype))(keys)
+        return jax.vmap(lambda k: _random.normal(k, (2, *shape[1:]), dtype))(keys)
     raise InputError(f"a scene has positions [T, V] or [N, T, V], got shape {shape}")
 
 

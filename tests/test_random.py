@@ -1,0 +1,64 @@
+"""`diffsense._random` draws exactly what `jax.random` draws, for every shape the project uses and
+under both threefry modes, so that drawing flat changes no number anywhere."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from diffsense import _random
+
+SHAPES = [(), (7,), (2, 21, 5), (3, 2, 4, 5)]
+# Every shape in float64 under the default (partitionable) threefry; float32 and the other mode
+# on the many-dimensional shapes, where the two ways of numbering elements could part.
+CASES = ([(s, jnp.float64, True) for s in SHAPES]
+         + [((3, 2, 4, 5), jnp.float32, True), ((3, 2, 4, 5), jnp.float64, False), ((2, 21, 5), jnp.float32, False)])
+
+
+def _bits(a):
+    a = np.asarray(a)
+    return a.view(np.uint64 if a.dtype.itemsize == 8 else np.uint32)
+
+
+def _draws(kind, key, shape, dtype):
+    """(ours, jax.random's) of `kind`: "normal", "uniform", or "bounded" (uniform between scalar
+    bounds, as the Monte-Carlo uniforms' (eps, 1 - eps))."""
+    eps = jnp.finfo(dtype).eps
+    args = (eps, 1.0 - eps) if kind == "bounded" else ()
+    name = "uniform" if kind == "bounded" else kind
+    ours = jax.jit(lambda k: getattr(_random, name)(k, shape, dtype, *args))(key)
+    theirs = jax.jit(lambda k: getattr(jax.random, name)(k, shape, dtype, *args))(key)
+    return ours, theirs
+
+
+@pytest.mark.parametrize("kind", ["normal", "uniform", "bounded"])
+@pytest.mark.parametrize(("shape", "dtype", "partitionable"), CASES)
+def test_draws_are_jax_randoms_bit_for_bit(kind, shape, dtype, partitionable):
+    with jax.threefry_partitionable(partitionable):
+        ours, theirs = _draws(kind, jax.random.PRNGKey(11), shape, dtype)
+    assert ours.shape == shape and ours.dtype == dtype
+    np.testing.assert_array_equal(_bits(ours), _bits(theirs))
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_uniform_with_bounds_of_the_draws_shape_is_jax_randoms(dtype):
+    """Per-element bounds (the scene variants draw each quantity between its own limits)."""
+    key = jax.random.PRNGKey(2)
+    lo = jnp.asarray(np.linspace(-3.0, 2.0, 12).reshape(4, 3), dtype)
+    hi = lo + jnp.asarray(np.linspace(0.5, 7.0, 12).reshape(4, 3), dtype)
+    ours = _random.uniform(key, (4, 3), dtype, lo, hi)
+    theirs = jax.random.uniform(key, (4, 3), dtype, lo, hi)
+    np.testing.assert_array_equal(_bits(ours), _bits(theirs))
+    assert np.all((np.asarray(ours) >= np.asarray(lo)) & (np.asarray(ours) < np.asarray(hi)))
+
+
+def test_draws_under_vmap_over_keys_are_jax_randoms():
+    """The measurement noise draws one [2, T, V] per variant key under vmap."""
+    keys = jax.random.split(jax.random.PRNGKey(9), 6)
+    ours = jax.jit(jax.vmap(lambda k: _random.normal(k, (2, 21, 5), jnp.float64)))(keys)
+    theirs = jax.vmap(lambda k: jax.random.normal(k, (2, 21, 5), jnp.float64))(keys)
+    np.testing.assert_array_equal(_bits(ours), _bits(theirs))
+    # Not one draw repeated: the variants' noises differ.
+    assert not np.array_equal(np.asarray(ours[0]), np.asarray(ours[1]))
