@@ -3,11 +3,15 @@ under both threefry modes, so that drawing flat changes no number anywhere."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import diffsense
 from diffsense import _random
 
 SHAPES = [(), (7,), (2, 21, 5), (3, 2, 4, 5)]
@@ -62,3 +66,14 @@ def test_draws_under_vmap_over_keys_are_jax_randoms():
     np.testing.assert_array_equal(_bits(ours), _bits(theirs))
     # Not one draw repeated: the variants' noises differ.
     assert not np.array_equal(np.asarray(ours[0]), np.asarray(ours[1]))
+
+
+def test_the_package_draws_through_the_flat_helpers_only():
+    """A shaped `jax.random.uniform` / `normal` elsewhere in the package would compile its draw
+    the slow way again (docs/development.md, "Code layout")."""
+    root = Path(diffsense.__file__).parent
+    found = [f"{path.relative_to(root)}:{i}"
+             for path in sorted(root.rglob("*.py")) if path.name != "_random.py"
+             for i, line in enumerate(path.read_text().splitlines(), 1)
+             if re.search(r"jax\.random\.(uniform|normal)\(", line)]
+    assert found == []
