@@ -3,6 +3,7 @@
 import importlib.util
 import json
 import math
+import random
 import subprocess
 from pathlib import Path
 
@@ -177,3 +178,32 @@ def test_triage_counts_a_broken_conftest_or_test_module_as_a_kill_and_a_missing_
     assert triage._status(4, b"ERROR: not found: tests/test_fusion.py::test_nope\n"
                              b"(no match in any of [<Module test_fusion.py>])") == "error"
     assert [triage._status(rc, b"") for rc in (0, 1, 2, 5)] == ["survived", "killed", "killed", "error"]
+
+
+def test_triage_sample_runs_a_seeded_uniform_subset_and_says_so(tmp_path, monkeypatch, capsys):
+    triage = _triage_module()
+    (tmp_path / "mutants").mkdir()
+    names = [f"m.x_f__mutmut_{i}" for i in range(1, 41)]
+    monkeypatch.setattr(triage, "_results", lambda w: {n: "not checked" for n in names} | {"m.x_g__mutmut_1": "killed"})
+    monkeypatch.setattr(triage, "_diff", lambda w, n: "")
+    ran = []
+
+    def fake_run(cmd, cwd, env, capture_output, timeout):
+        if "MUTANT_UNDER_TEST" in env:
+            ran.append(env["MUTANT_UNDER_TEST"])
+        return subprocess.CompletedProcess(cmd, 1 if "MUTANT_UNDER_TEST" in env else 0, b"", b"")
+
+    monkeypatch.setattr(triage.subprocess, "run", fake_run)
+    assert triage.main([str(tmp_path), "t.py", "--jobs", "1", "--sample", "7", "--seed", "3"]) == 0
+    assert sorted(ran) == sorted(random.Random(3).sample(sorted(names), 7))
+    assert "Triage of 7 unchecked mutants (a uniform sample of 40, seed 3)" in (tmp_path / "triage.md").read_text()
+    first = list(ran)
+    ran.clear()
+    assert triage.main([str(tmp_path), "t.py", "--jobs", "1", "--sample", "7", "--seed", "4"]) == 0
+    assert sorted(ran) != sorted(first)  # another seed, another draw
+    ran.clear()
+    assert triage.main([str(tmp_path), "t.py", "--jobs", "1", "--sample", "40"]) == 0
+    assert len(ran) == 40 and "uniform sample" not in (tmp_path / "triage.md").read_text()
+    capsys.readouterr()
+    assert triage.main([str(tmp_path), "t.py", "--sample", "0"]) == 2
+    assert capsys.readouterr().err.startswith("error: --sample must be a positive")

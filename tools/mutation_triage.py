@@ -28,6 +28,10 @@ unmutated then runs every test the mutants will run, filling the cache; a test t
 broke would fail there, not pass as a kill. (The tests that count compilations set a cache
 folder of their own.)
 
+With `--sample N` (and `--seed S`, default 0), a uniform random sample of N of the unchecked
+mutants is triaged instead of all of them: its score estimates the file's (docs/mutation.md,
+"Package-wide estimates"), and its survivors are the ones to review.
+
 A triage prints each mutant's status as it finishes ("12/427 name: killed"); `--resume LOG`
 reads those lines from an interrupted run's stderr and triages only the mutants it had not
 finished (the report covers all of them; its minutes are the resumed run's).
@@ -40,6 +44,7 @@ import collections
 import concurrent.futures
 import json
 import os
+import random
 import subprocess
 import sys
 import time
@@ -150,8 +155,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="share JAX's persistent compilation cache in DIR across the runs")
     parser.add_argument("--resume", type=Path, metavar="LOG",
                         help="take the statuses an interrupted triage printed (its stderr) as done")
+    parser.add_argument("--sample", type=int, metavar="N", help="triage N mutants drawn at random")
+    parser.add_argument("--seed", type=int, default=0, help="seed of --sample's draw (default 0)")
     args = parser.parse_args(argv)
     _CACHE_ENV.clear()
+    if args.sample is not None and args.sample < 1:
+        print(f"error: --sample must be a positive number of mutants, got {args.sample}", file=sys.stderr)
+        return 2
     if (args.reach is None) == (not args.tests):
         print("error: give focused tests or --reach SECONDS (one of the two)", file=sys.stderr)
         return 2
@@ -168,6 +178,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {args.workdir} has no unchecked mutants"
               + (f" of {args.module}" if args.module else ""), file=sys.stderr)
         return 2
+    unchecked = len(todo)
+    if args.sample is not None and args.sample < unchecked:
+        todo = sorted(random.Random(args.seed).sample(todo, args.sample))
     plans = _plans(args, todo)
     if args.compile_cache is not None:
         _CACHE_ENV.update(JAX_COMPILATION_CACHE_DIR=str(args.compile_cache.resolve()),
@@ -185,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
             status[futures[done]] = done.result()
             print(f"{len(status)}/{len(todo)} {futures[done]}: {status[futures[done]]}",
                   file=sys.stderr, flush=True)
-    _write_report(args, todo, status, (time.monotonic() - start) / 60)
+    _write_report(args, todo, status, (time.monotonic() - start) / 60, unchecked)
     return 0
 
 
@@ -206,14 +219,15 @@ def _passes_unmutated(args, tests: list[str]) -> bool:
     return False
 
 
-def _write_report(args, todo: list[str], status: dict[str, str], minutes: float) -> None:
+def _write_report(args, todo: list[str], status: dict[str, str], minutes: float, unchecked: int) -> None:
     counts = collections.Counter(status.values())
     of = f" of {args.module}" if args.module else ""
     tests = (f"each mutant's reaching tests, fastest first, within {args.reach:g} s"
              if args.reach is not None else " ".join(args.tests))
     if args.compile_cache is not None:
         tests += " (a shared compilation cache)"
-    lines = [f"# Triage of {len(todo)} unchecked mutants{of} ({minutes:.1f} min)", "",
+    sample = (f" (a uniform sample of {unchecked}, seed {args.seed})" if len(todo) < unchecked else "")
+    lines = [f"# Triage of {len(todo)} unchecked mutants{of}{sample} ({minutes:.1f} min)", "",
              "Tests: " + tests, "",
              ", ".join(f"{k}: {counts[k]}" for k in _STATUSES),
              "", "## Not killed", ""]
