@@ -10,6 +10,7 @@ Parameters differ from the shipped ones and from each other, so a swapped field 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -17,15 +18,18 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from diffsense.config import replace
+from diffsense.errors import InputError
+from diffsense.scene import load_scenario, simulate_scenario
 from diffsense.scene._background_mobil import lane_change_starts
 from diffsense.scene._datatypes import ADJACENT, BACKGROUND, CAR, EGO, LEAD, TARGET, TRUCK, VAN
 from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams, idm_acceleration
 from diffsense.scene._lane_change import quintic_lateral_offset_m, quintic_lateral_speed_mps
 from diffsense.scene._mobil import MOBILParams
 from diffsense.scene._road import curvature_1pm, frenet_to_cartesian, lane_index, load_road
-from diffsense.scene._scenario_config import DriverModel
-from diffsense.scene._simulate import MIN_DESIRED_SPEED_MPS, _idm, leaders, simulate_plan
-from diffsense.scene._variants import VehiclePlan
+from diffsense.scene._scenario_config import DriverModel, load_vehicle_models
+from diffsense.scene._simulate import MIN_DESIRED_SPEED_MPS, SCENE_DT_S, _idm, leaders, simulate_numbers, simulate_plan
+from diffsense.scene._variants import VehiclePlan, scenario_numbers
 
 DRIVER = DriverModel(time_headway_s=1.3, min_gap_m=2.5, max_accel_mps2=1.2, comfort_decel_mps2=1.7,
                      accel_exponent=3.5, max_brake_mps2=6.0, follower_speed_ratio=1.2,
@@ -175,6 +179,17 @@ def test_a_tie_in_s_goes_to_the_higher_index_and_touching_bodies_overlap_only_in
     gap, lead_v = leaders(*(jnp.asarray(x) for x in (s, np.array([0.0, 2.5, 0.0]), v, length, width)), 0.25)
     np.testing.assert_allclose(np.asarray(gap), [16.0, FREE_ROAD_GAP_M, FREE_ROAD_GAP_M])
     np.testing.assert_allclose(np.asarray(lead_v), [24.0, 22.0, 24.0])
+    # Heading into a lane (3.5 m lanes: every number below is exact in binary): exactly half a
+    # lane away is not into it (strict <), whether j heads into i's lane or i into j's.
+    for shift, inside in ((1.75, False), (1.7499, True)):
+        # j = 1, 20 m to the side, heads to `shift` m from i = 0's centre; 2 is 0's leader.
+        gap, _ = leaders(*(jnp.asarray(x) for x in (s, np.array([0.0, 20.0, 0.0]), v, length, width)), 0.25,
+                         heading_to_m=jnp.asarray([0.0, shift, 0.0]), lane_width_m=3.5)
+        assert float(gap[0]) == (-4.0 if inside else 16.0), shift
+        # i = 0 heads to `shift` m from j = 1's centre (20 m to the side); 2 is out of the way.
+        gap, _ = leaders(*(jnp.asarray(x) for x in (s, np.array([0.0, 20.0, 10.0]), v, length, width)), 0.25,
+                         heading_to_m=jnp.asarray([20.0 - shift, 20.0, 10.0]), lane_width_m=3.5)
+        assert float(gap[0]) == (-4.0 if inside else FREE_ROAD_GAP_M), shift
 
 
 def test_steady_state_idm_parameters():
@@ -192,12 +207,18 @@ def test_steady_state_idm_parameters():
     assert v0[3] == DRIVER.follower_speed_ratio * MIN_DESIRED_SPEED_MPS or v0[3] == MIN_DESIRED_SPEED_MPS
 
 
-@pytest.mark.parametrize("with_mobil", [False, True])
-def test_trajectories_frame_by_frame(with_mobil):
-    frames, period = 61, 7
+@pytest.mark.parametrize(("with_mobil", "period"), [(False, 7), (True, 7), (True, None)])
+def test_trajectories_frame_by_frame(with_mobil, period):
+    frames = 60  # not 61: at 6.0 s car 4's change (from 4.0 s) is half done, on the lane boundary
     mobil = MOBIL if with_mobil else None
-    want, x, y, heading, lane = ref_simulate(PLAN, ROAD, DRIVER, frames, mobil, period)
-    scene = jax.jit(simulate_plan, static_argnums=(2, 3, 4, 6))(PLAN, ROAD, DRIVER, frames, DT, mobil, period)
+    want, x, y, heading, lane = ref_simulate(PLAN, ROAD, DRIVER, frames, mobil, period or 10)
+    if period is None:  # the default: a decision every 10 frames
+        scene = jax.jit(simulate_plan, static_argnums=(2, 3, 4))(PLAN, ROAD, DRIVER, frames, DT, mobil)
+        # Car 4 becomes free to decide at 4.0 s (its plan's lane change of 4 s from t = 0 ends),
+        # frame 40, a decision frame: it starts its change right there.
+        assert want["d"][40, 4] == want["d"][0, 4] != want["d"][41, 4]
+    else:
+        scene = jax.jit(simulate_plan, static_argnums=(2, 3, 4, 6))(PLAN, ROAD, DRIVER, frames, DT, mobil, period)
     for name, got in (("s", scene.s_m), ("v", scene.speed_mps), ("d", scene.d_m)):
         np.testing.assert_allclose(np.asarray(got), want[name], rtol=1e-10, atol=1e-9, err_msg=name)
     np.testing.assert_allclose(np.asarray(scene.x_m), x, rtol=1e-10, atol=1e-9)
@@ -215,3 +236,58 @@ def test_trajectories_frame_by_frame(with_mobil):
     assert abs(want["d"][-1, 2] - 1.5 * W) < 1e-9
     moved = np.abs(want["d"][-1] - want["d"][0]) > 1.0
     assert moved[4] == with_mobil and not moved[[0, 1, 3, 5, 6, 7]].any()
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    ({"ego": {"lane": 3}, "target_lane": 4, "adjacent_lane": 2}, "sc05: ego.lane 3 is not a lane of road 'straight' (0..2)"),
+    ({"ego": {"lane": 2}, "target_lane": 3, "adjacent_lane": 1}, "sc05: target_lane 3 is not a lane of road 'straight' (0..2)"),
+    ({"adjacent_lane": 3}, "sc05: adjacent_lane 3 is not a lane of road 'straight' (0..2)"),
+    ({"adjacent_lane": -1}, "sc05: adjacent_lane -1 is not a lane of road 'straight' (0..2)"),
+])
+def test_a_lane_off_the_road_is_named_in_the_error(edit, message):
+    cfg = load_scenario("sc05")  # the straight road: lanes 0..2
+    if "ego" in edit:
+        edit = {**edit, "ego": {**dataclasses.asdict(cfg.ego), **edit["ego"]}}
+    with pytest.raises(InputError) as error:
+        simulate_scenario(replace(cfg, **edit), 2, jax.random.key(0))
+    assert str(error.value) == message
+
+
+def test_a_speed_offset_is_a_config_edit_of_the_ego_speed():
+    """A number (a Python float, or a numpy scalar, which is one) moves the ego's start speed, and
+    with it every start speed, as editing ego.speed_kmh does; the scene keeps its float type."""
+    cfg, key = load_scenario("sc01"), jax.random.key(4)
+    base = simulate_scenario(cfg, 3, key)
+    ego = {**dataclasses.asdict(cfg.ego)}
+    ego["speed_kmh"] = {k: v + 7.2 for k, v in ego["speed_kmh"].items()}
+    edited = simulate_scenario(replace(cfg, ego=ego), 3, key)
+    for offset in (7.2, np.float64(7.2)):
+        moved = simulate_scenario(cfg, 3, key, speed_offset_kmh=offset)
+        assert moved.speed_mps.dtype == moved.s_m.dtype == jnp.float32, type(offset)
+        np.testing.assert_allclose(np.asarray(moved.speed_mps[:, 0]), np.asarray(base.speed_mps[:, 0]) + 2.0, rtol=1e-6)
+        np.testing.assert_allclose(np.asarray(moved.speed_mps), np.asarray(edited.speed_mps), rtol=1e-5, atol=1e-4)
+        np.testing.assert_allclose(np.asarray(moved.s_m), np.asarray(edited.s_m), rtol=1e-5, atol=1e-3)
+
+
+def test_background_traffic_changes_lanes_by_the_models_mobil_at_its_decision_period():
+    cfg = replace(load_scenario("sc05"), background={"count": 6, "spacing_m": 25.0})  # close enough to interact
+    models = load_vehicle_models()
+    models = dataclasses.replace(models, mobil=dataclasses.replace(
+        models.mobil, politeness=0.05, threshold_mps2=0.05, keep_right_bias_mps2=0.0, decision_period_s=0.1))
+    key, n = jax.random.key(2), 2
+    got = simulate_scenario(cfg, n, key, models=models, dtype=jnp.float64)
+    road = load_road(cfg.road)
+    nums = scenario_numbers(cfg, models, road, jnp.float64)
+    frames = round(cfg.duration_s / SCENE_DT_S) + 1
+    mobil = MOBILParams(politeness=jnp.asarray(0.05), threshold_mps2=jnp.asarray(0.05),
+                        safe_decel_mps2=jnp.asarray(models.mobil.safe_decel_mps2), keep_right_bias_mps2=jnp.asarray(0.0))
+    want = simulate_numbers(nums, road, models.driver, key, n, frames, mobil, 1)  # a decision every frame
+    jax.tree.map(lambda a, b: np.testing.assert_array_equal(np.asarray(a), np.asarray(b)), got, want)
+    background = np.asarray(got.role[0]) == BACKGROUND
+    assert np.any(np.abs(np.diff(np.asarray(got.lane)[:, :, background], axis=1)) > 0)  # some change lanes
+    every_other = simulate_numbers(nums, road, models.driver, key, n, frames, mobil, 2)
+    assert not np.array_equal(np.asarray(every_other.d_m), np.asarray(got.d_m))
+    without = simulate_scenario(replace(cfg, background={"count": 6, "spacing_m": 25.0, "mobil": False}), n, key, models=models,
+                                dtype=jnp.float64)
+    kept = np.asarray(without.d_m[:, :, background])  # without MOBIL every background car keeps its lane
+    np.testing.assert_array_equal(kept, np.broadcast_to(np.asarray(want.d_m[:, :1, background]), kept.shape))
