@@ -2,9 +2,8 @@
 in a fraction of the time.
 
 JAX numbers the elements of a threefry draw by their row-major index (in its partitionable mode,
-the default, through a per-dimension iota: `jax._src.random.prng.iota_2x32_shape`; in the other
-by drawing flat and reshaping), and the conversion of bits to uniform or normal numbers is
-element by element. So `uniform(key, (a, b, c))` is `jax.random.uniform(key, (a * b * c,))`
+the default, built from one 64-bit iota per dimension; in the other by drawing flat and
+reshaping), and the conversion of bits to uniform or normal numbers is element by element. So `uniform(key, (a, b, c))` is `jax.random.uniform(key, (a * b * c,))`
 reshaped, bit for bit (`tests/test_random.py` checks it shape by shape). XLA:CPU compiles the
 partitionable index of a many-dimensional shape slowly: `python benchmarks/bench_random.py`
 prints the compile times of both forms.
