@@ -269,11 +269,12 @@ def test_a_speed_offset_is_a_config_edit_of_the_ego_speed():
         np.testing.assert_allclose(np.asarray(moved.s_m), np.asarray(edited.s_m), rtol=1e-5, atol=1e-3)
 
 
-def test_background_traffic_changes_lanes_by_the_models_mobil_at_its_decision_period():
+@pytest.mark.parametrize(("decision_period_s", "period", "other"), [(0.1, 1, 2), (0.3, 3, 1)])
+def test_background_traffic_changes_lanes_by_the_models_mobil_at_its_decision_period(decision_period_s, period, other):
     cfg = replace(load_scenario("sc05"), background={"count": 6, "spacing_m": 25.0})  # close enough to interact
     models = load_vehicle_models()
     models = dataclasses.replace(models, mobil=dataclasses.replace(
-        models.mobil, politeness=0.05, threshold_mps2=0.05, keep_right_bias_mps2=0.0, decision_period_s=0.1))
+        models.mobil, politeness=0.05, threshold_mps2=0.05, keep_right_bias_mps2=0.0, decision_period_s=decision_period_s))
     key, n = jax.random.key(2), 2
     got = simulate_scenario(cfg, n, key, models=models, dtype=jnp.float64)
     road = load_road(cfg.road)
@@ -281,12 +282,12 @@ def test_background_traffic_changes_lanes_by_the_models_mobil_at_its_decision_pe
     frames = round(cfg.duration_s / SCENE_DT_S) + 1
     mobil = MOBILParams(politeness=jnp.asarray(0.05), threshold_mps2=jnp.asarray(0.05),
                         safe_decel_mps2=jnp.asarray(models.mobil.safe_decel_mps2), keep_right_bias_mps2=jnp.asarray(0.0))
-    want = simulate_numbers(nums, road, models.driver, key, n, frames, mobil, 1)  # a decision every frame
+    want = simulate_numbers(nums, road, models.driver, key, n, frames, mobil, period)  # decision_period_s / 0.1 s
     jax.tree.map(lambda a, b: np.testing.assert_array_equal(np.asarray(a), np.asarray(b)), got, want)
     background = np.asarray(got.role[0]) == BACKGROUND
     assert np.any(np.abs(np.diff(np.asarray(got.lane)[:, :, background], axis=1)) > 0)  # some change lanes
-    every_other = simulate_numbers(nums, road, models.driver, key, n, frames, mobil, 2)
-    assert not np.array_equal(np.asarray(every_other.d_m), np.asarray(got.d_m))
+    elsewhen = simulate_numbers(nums, road, models.driver, key, n, frames, mobil, other)
+    assert not np.array_equal(np.asarray(elsewhen.d_m), np.asarray(got.d_m))
     without = simulate_scenario(replace(cfg, background={"count": 6, "spacing_m": 25.0, "mobil": False}), n, key, models=models,
                                 dtype=jnp.float64)
     kept = np.asarray(without.d_m[:, :, background])  # without MOBIL every background car keeps its lane
