@@ -226,8 +226,8 @@ def test_a_traced_lane_width_gives_the_same_numbers(dtype):
         assert a.dtype == b.dtype
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     wider = jax.jit(with_width)(jnp.asarray(4.0))
-    np.testing.assert_allclose(wider.d_m, (np.array([2, 3, 2, 3, 4]) + 0.5) * 4.0, rtol=1e-7)
-    np.testing.assert_allclose(wider.background_d_m, (np.arange(8) % 6 + 0.5) * 4.0, rtol=1e-7)
+    np.testing.assert_allclose(wider.d_m, (np.array([2, 3, 2, 3, 4]) + 0.5) * 4.0, rtol=1e-15)
+    np.testing.assert_allclose(wider.background_d_m, (np.arange(8) % 6 + 0.5) * 4.0, rtol=1e-15)
 
 
 @pytest.mark.parametrize("background", [0, 4])
