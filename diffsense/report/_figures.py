@@ -7,7 +7,9 @@
   neighbours, one panel per r value.
 
 Figures are built on `matplotlib.figure.Figure` (Agg canvas, no pyplot): nothing global is
-touched and nothing needs closing. `scale` and `unit` convert r for display.
+touched and nothing needs closing. `scale` and `unit` convert r for display. Margins are fixed in
+inches (`_place`) rather than solved by a layout engine: constrained layout measures every tick
+label before it places the axes, about half of the horizon figure's drawing time.
 """
 
 from __future__ import annotations
@@ -25,6 +27,28 @@ from diffsense._io import save_figure
 # The predictor's horizon: 25 points at 5 Hz (0.2 .. 5 s).
 HORIZON_DT_S = 0.2
 _DPI = 120
+
+
+# Margins [in]: room for tick labels and an axis label on the left and below, a panel title on
+# top, a legend row, a figure title; gaps between panels hold both neighbours' labels.
+_LEFT_IN, _RIGHT_IN, _TOP_IN, _BOTTOM_IN = 0.75, 0.2, 0.35, 0.7
+_TWIN_RIGHT_IN = 0.85
+_SUPTITLE_IN, _LEGEND_ROW_IN = 0.3, 0.2
+_WSPACE_IN, _HSPACE_IN = 0.85, 0.75
+
+
+def _place(fig: Figure, *, legend_rows: int, title: bool, right_in: float = _RIGHT_IN) -> None:
+    """Fix the subplot grid's margins in inches, leaving `legend_rows` legend rows at the bottom
+    (and a row for the figure title when `title`)."""
+    width_in, height_in = fig.get_size_inches()
+    bottom_in = _BOTTOM_IN + _LEGEND_ROW_IN * legend_rows
+    top_in = _TOP_IN + (_SUPTITLE_IN if title else 0.0)
+    nrows, ncols = fig.axes[0].get_subplotspec().get_gridspec().get_geometry()
+    panel_w = (width_in - _LEFT_IN - right_in - _WSPACE_IN * (ncols - 1)) / ncols
+    panel_h = (height_in - bottom_in - top_in - _HSPACE_IN * (nrows - 1)) / nrows
+    fig.subplots_adjust(left=_LEFT_IN / width_in, right=1.0 - right_in / width_in,
+                        bottom=bottom_in / height_in, top=1.0 - top_in / height_in,
+                        wspace=_WSPACE_IN / panel_w, hspace=_HSPACE_IN / panel_h)
 
 
 def _label(key: Any, scale: float, unit: str) -> str:
@@ -60,7 +84,7 @@ def plot_objective(
         param, scale, unit: x-axis name and display conversion (dE/dr is divided by scale).
     """
     x = np.asarray(r, dtype=float) * scale
-    fig = Figure(figsize=(7.5, 5.0), layout="constrained")
+    fig = Figure(figsize=(7.5, 5.0))
     ax = fig.add_subplot()
     ax.plot(x, E_soft, color="C0", marker=".", linewidth=0.8, label="E soft (lines: interpolated)")
     ax.plot(x, E_hard, linestyle="none", color="C1", marker="x", label="E hard (evaluated points)")
@@ -77,10 +101,11 @@ def plot_objective(
     twin.set_ylabel(f"dE/d{param} [m/{unit}]" if unit else f"dE/d{param}")
     handles = ax.get_legend_handles_labels()
     twin_handles = twin.get_legend_handles_labels()
-    fig.legend(handles[0] + twin_handles[0], handles[1] + twin_handles[1], fontsize=8, loc="outside lower center",
-               ncol=3)
+    labels = handles[1] + twin_handles[1]
+    fig.legend(handles[0] + twin_handles[0], labels, fontsize=8, loc="lower center", ncol=3)
     if title:
         fig.suptitle(title, fontsize=10)
+    _place(fig, legend_rows=math.ceil(len(labels) / 3), title=bool(title), right_in=_TWIN_RIGHT_IN)
     save_figure(fig, path, dpi=_DPI)
 
 
@@ -107,7 +132,7 @@ def plot_rmse_horizon(
         raise ValueError("no scenarios to plot")
     ncols = min(2, len(names))
     nrows = math.ceil(len(names) / ncols)
-    fig = Figure(figsize=(max(5.0 * ncols, 8.0), 3.2 * nrows + 1.0), layout="constrained")
+    fig = Figure(figsize=(max(5.0 * ncols, 8.0), 3.2 * nrows + 1.0))
     axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax, name in zip(axes.flat, names):
         gt = np.asarray(curves[name]["gt"], dtype=float)
@@ -123,9 +148,11 @@ def plot_rmse_horizon(
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=7, loc="outside lower center", ncol=min(len(labels), 4))
+    ncol = min(len(labels), 4)
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=ncol)
     if title:
         fig.suptitle(title, fontsize=10)
+    _place(fig, legend_rows=math.ceil(len(labels) / ncol), title=bool(title))
     save_figure(fig, path, dpi=_DPI)
 
 
