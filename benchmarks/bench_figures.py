@@ -19,7 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from diffsense.report._figures import plot_detection_timeline, plot_objective, plot_rmse_horizon
+from diffsense.report._figures import (
+    plot_detection_timeline,
+    plot_objective,
+    plot_rmse_horizon,
+)
 
 STEPS_DEG = (30.0, 60.0, 90.0, 120.0, 150.0, 180.0)
 TITLE = "radar: E over hfov_deg, 6 scenarios x 8 variants"

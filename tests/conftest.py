@@ -14,10 +14,10 @@ from pathlib import Path
 # the suite on the fully optimised compile that users get.
 os.environ.setdefault("JAX_DISABLE_MOST_OPTIMIZATIONS", "1")
 
-import jax  # noqa: E402
-import pytest  # noqa: E402
+import jax
+import pytest
 
-from diffsense._executables import keep_in  # noqa: E402
+from diffsense._executables import keep_in
 
 jax.config.update("jax_enable_x64", True)
 # No test reads or writes the user's persistent compilation cache: a command run in-process
