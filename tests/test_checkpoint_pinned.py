@@ -221,6 +221,7 @@ _PIDS = {
     "class": _pid_as([_U("storage"), _G("collections", "OrderedDict"), _U("0"), _U("cpu"), _I(24)]),
     "key letters": _pid(key="a"),
     "key digit not ASCII": _pid(key="\u0661"),  # an Arabic-Indic one: str.isdigit, not ASCII
+    "class None": _pid_as([_U("storage"), b"N", _U("0"), _U("cpu"), _I(24)]),
     "numel float": _pid(numel=b"G@8\x00\x00\x00\x00\x00\x00"),  # 24.0
     "numel bool": _pid(numel=b"\x88"),  # True: a bool, not an int
     "numel negative": _pid(numel=-1),
@@ -237,6 +238,12 @@ def test_a_persistent_id_must_be_a_float_storage_s(tmp_path, pid):
     path = _checkpoint(tmp_path / "pid.tar", {"w": _tensor(pid, 0, (8, 3), (3, 1))})
     with pytest.raises(InputError, match=f"checkpoint {path}: refused persistent id "):
         read_state_dict(path)
+
+
+def test_a_refused_persistent_id_is_shown_cut_to_60_characters(tmp_path):
+    path = _checkpoint(tmp_path / "pid.tar", {"w": _tensor(_PIDS["tag"], 0, (8, 3), (3, 1))})
+    shown = "('storagex', <class 'diffsense.predictors._checkpoint.FloatStorage'>, '0', 'cpu', 24)"
+    _refused_as(path, f"refused persistent id {shown[:57]}...")
 
 
 def test_a_tensor_needs_a_float_storage(tmp_path):
