@@ -180,6 +180,14 @@ def test_stride_0_is_allowed_only_on_a_dimension_of_size_1(tmp_path):
                 "refused: a tensor with stride 0 (shape (8, 2), stride (3, 0))")
 
 
+def test_a_tensor_may_have_64_dimensions_as_torch_s_may(tmp_path):
+    ok = _checkpoint(tmp_path / "64.tar", {"w": _tensor(_pid(), 5, (1,) * 64, (1,) * 64)})
+    assert read_state_dict(ok)["w"].reshape(-1).tolist() == [5.0]
+    geometry = (5, (1,) * 65, (1,) * 65)
+    _refused_as(_checkpoint(tmp_path / "65.tar", {"w": _tensor(_pid(), *geometry)}),
+                f"refused: invalid tensor geometry {ck._short(geometry)}")
+
+
 def test_a_tensor_s_elements_are_limited_per_dimension_and_in_all(tmp_path, monkeypatch):
     monkeypatch.setattr(ck, "MAX_STORAGE_BYTES", 96)  # 24 elements
     ok = _checkpoint(tmp_path / "ok.tar", {"w": _tensor(_pid(), 0, (24,), (1,))})
