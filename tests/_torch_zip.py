@@ -61,3 +61,11 @@ def write(path, sd: dict[str, np.ndarray], extra_global=None, root: str = "archi
         for key_id, arr in enumerate(sd.values()):
             z.writestr(f"{root}/data/{key_id}", np.ascontiguousarray(arr, "<f4").tobytes())
         z.writestr(f"{root}/version", "3\n")
+
+
+def zip_file(path, members: dict[str, bytes], compression: int = zipfile.ZIP_STORED):
+    """Write `members` (name -> bytes) as a zip at `path`; returns `path`."""
+    with zipfile.ZipFile(path, "w", compression) as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return path
