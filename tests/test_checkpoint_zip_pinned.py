@@ -58,6 +58,9 @@ def test_the_limits_are_4096_members_and_1_mib_of_directory_inclusive():
     assert _refusal(b"\0" * 100 + _end(4096, MiB)) is None
     assert _refusal(b"\0" * 100 + _end(4097, 10)) == _says(4097, 10)
     assert _refusal(b"\0" * 100 + _end(3, MiB + 1)) == _says(3, MiB + 1)
+    # The fields are unsigned: their largest values are the largest counts, not -1.
+    assert _refusal(b"\0" * 100 + _end(0xFFFF, 10)) == _says(0xFFFF, 10)
+    assert _refusal(b"\0" * 100 + _end(3, 0xFFFFFFFF)) == _says(3, 0xFFFFFFFF)
 
 
 def test_a_record_behind_an_archive_comment_is_found_as_zipfile_finds_it():
