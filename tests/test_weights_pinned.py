@@ -162,3 +162,19 @@ def test_weights_are_saved_as_float32_whatever_the_network_runs_in(tmp_path, par
     tree = serialization.msgpack_restore((tmp_path / "w.msgpack").read_bytes())
     assert {np.asarray(v).dtype for group in tree["params"].values() for v in group.values()} == {np.dtype(np.float32)}
     assert read_card(tmp_path / "w.msgpack") == {"note": "x"}
+
+
+def test_conversion_is_float32_both_ways(params):
+    import jax.numpy as jnp
+
+    from diffsense.predictors import init_predictor
+
+    sd = state_dict_from_model(init_predictor().model(jnp.float64))
+    assert {v.dtype for v in sd.values()} == {np.dtype(np.float32)}
+    model = model_from_state_dict({k: v.astype(np.float64) for k, v in sd.items()})
+    assert np.asarray(model.dec_lstm.w_ih).dtype == np.float32
+
+
+def test_a_state_dict_s_default_source_and_a_flat_decoder_weight():
+    with pytest.raises(InputError, match=r"^checkpoint: dec_lstm.weight_ih_l0 has 50 input columns; "):
+        model_from_state_dict({"dec_lstm.weight_ih_l0": np.zeros(50, np.float32)})
