@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diffsense.report._figures import (
+from diffsense.report import (
     plot_detection_timeline,
     plot_objective,
     plot_rmse_horizon,
