@@ -9,6 +9,7 @@ OrderedDict())`, storages as persistent ids ('storage', torch.FloatStorage, key,
 
 from __future__ import annotations
 
+import io
 import struct
 import zipfile
 
@@ -69,3 +70,15 @@ def zip_file(path, members: dict[str, bytes], compression: int = zipfile.ZIP_STO
         for name, data in members.items():
             z.writestr(name, data)
     return path
+
+
+def patch_sizes(blob: bytes, member: str, usize: int | None = None, csize: int | None = None) -> bytes:
+    """`blob` with `member`'s declared sizes rewritten in both its local and central headers."""
+    b, name = bytearray(blob), member.encode()
+    with zipfile.ZipFile(io.BytesIO(blob)) as z:
+        local = z.getinfo(member).header_offset
+    central = next(i for i in range(len(b)) if b[i:i + 4] == b"PK\x01\x02" and b[i + 46:i + 46 + len(name)] == name)
+    for pos, value in ((local + 18, csize), (local + 22, usize), (central + 20, csize), (central + 24, usize)):
+        if value is not None:
+            struct.pack_into("<L", b, pos, value)
+    return bytes(b)

@@ -91,18 +91,6 @@ def _flip(rng, data: bytes, lo: int = 0) -> bytes:
     return bytes(b)
 
 
-def _patch_sizes(blob: bytes, member: str, usize: int | None = None, csize: int | None = None) -> bytes:
-    """`blob` with `member`'s declared sizes rewritten in both its local and central headers."""
-    b, name = bytearray(blob), member.encode()
-    with zipfile.ZipFile(io.BytesIO(blob)) as z:
-        local = z.getinfo(member).header_offset
-    central = next(i for i in range(len(b)) if b[i:i + 4] == b"PK\x01\x02" and b[i + 46:i + 46 + len(name)] == name)
-    for pos, value in ((local + 18, csize), (local + 22, usize), (central + 20, csize), (central + 24, usize)):
-        if value is not None:
-            struct.pack_into("<L", b, pos, value)
-    return bytes(b)
-
-
 def _geometry_cases() -> list[tuple[str, tuple, str]]:
     """(name, (offset, size, stride, numel) of `W`, expected: "ok" or a needle of the refusal)."""
     big = 1 << 29
@@ -181,12 +169,12 @@ def _cases(folder: Path, scale: int) -> tuple[list[tuple[str, bytes, str]], Path
     for base_name, base in (("stored", stored), ("deflated", deflated)):
         for member in ("archive/data/0", "archive/data.pkl"):
             for usize in (0, 1, 95, 97, 64 * MiB, 64 * MiB + 4, 1 << 31, (1 << 32) - 1):
-                cases.append((f"{base_name} {member} usize {usize}", _patch_sizes(base, member, usize), "any"))
-            cases.append((f"{base_name} {member} csize 2^32-1", _patch_sizes(base, member, csize=(1 << 32) - 1), "any"))
+                cases.append((f"{base_name} {member} usize {usize}", _torch_zip.patch_sizes(base, member, usize), "any"))
+            cases.append((f"{base_name} {member} csize 2^32-1", _torch_zip.patch_sizes(base, member, csize=(1 << 32) - 1), "any"))
     # Deflate bombs: 80 MiB of zeros in about 80 kB, declared honestly or as the tensor's 96 bytes.
     bomb = _zip(_members(pkl, bytes(80 * MiB)), zipfile.ZIP_DEFLATED)
     cases += [("bomb, honest header", bomb, "over the limit"),
-              ("bomb, lying header", _patch_sizes(bomb, "archive/data/0", 96), "refused")]
+              ("bomb, lying header", _torch_zip.patch_sizes(bomb, "archive/data/0", 96), "refused")]
     # The largest load the limits allow: one 60 MiB storage, deflated, copied once.
     n = 60 * MiB // 4
     fat = _torch_zip.pickle_bytes({"w": np.zeros(1, np.float32)}, geometry={"w": (0, (n,), (1,), n)})

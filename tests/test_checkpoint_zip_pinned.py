@@ -153,18 +153,16 @@ def test_members_compressed_without_an_output_bound_are_refused(compression, met
 
 
 def test_a_member_holding_other_than_it_declares_is_refused(tmp_path):
-    from test_checkpoint_fuzz import _patch_sizes
-
     pkl = _torch_zip.pickle_bytes({"w": W})
     good = tmp_path / "good.tar"
     _torch_zip.zip_file(good, {"archive/data.pkl": pkl, "archive/data/0": W.tobytes()})
     blob = good.read_bytes()
     short = tmp_path / "short.tar"  # 96 bytes stored, 95 declared: zipfile stops at 95, its CRC fails
-    short.write_bytes(_patch_sizes(blob, "archive/data/0", usize=95))
+    short.write_bytes(_torch_zip.patch_sizes(blob, "archive/data/0", usize=95))
     with zipfile.ZipFile(short) as archive, pytest.raises(zipfile.BadZipFile, match="Bad CRC-32"):
         ck._read_member(archive, "archive/data/0", 200)
     long = tmp_path / "long.tar"  # 96 bytes stored, 100 declared
-    long.write_bytes(_patch_sizes(blob, "archive/data/0", usize=100))
+    long.write_bytes(_torch_zip.patch_sizes(blob, "archive/data/0", usize=100))
     with zipfile.ZipFile(long) as archive:
         assert (_member_refusal(archive, "archive/data/0", 200)
                 == "archive/data/0 holds 96 bytes, not the 100 it declares")
