@@ -8,7 +8,7 @@ from pathlib import Path
 
 # The suite compiles with JAX's `jax_disable_most_optimizations` (XLA's CPU backend at
 # optimisation level 0, its expensive LLVM passes off): most of the suite's time is compiling
-# programs that then run once or twice, and the flag cuts a test file's time by about a third
+# programs that then run once or twice, and the flag cuts the suite's CPU time by about 30 %
 # (docs/development.md). It is set in the environment, before JAX is imported, so the commands a
 # test launches as subprocesses compile the same way. `JAX_DISABLE_MOST_OPTIMIZATIONS=0` runs
 # the suite on the fully optimised compile that users get.
