@@ -31,8 +31,8 @@ def test_the_single_mode_mean_is_its_one_mode():
 
 def test_the_manoeuvre_mean_is_the_most_probable_mode_or_the_weighted_one():
     fut = RNG.normal(size=(2, 6, 25, 5))
-    lon = np.array([[0.3, 0.7], [0.9, 0.1]])  # braking, normal
-    lat = np.array([[0.2, 0.5, 0.3], [0.1, 0.2, 0.7]])  # left, right
+    lon = np.array([[0.3, 0.7], [0.9, 0.1]])  # (normal, braking): row 0 brakes, row 1 does not
+    lat = np.array([[0.2, 0.5, 0.3], [0.1, 0.2, 0.7]])  # (keep, left, right): row 0 left, row 1 right
     mode_prob = RNG.dirichlet(np.ones(6), size=2)
     pred = Prediction(fut=jnp.asarray(fut), mode_prob=jnp.asarray(mode_prob), lat_prob=jnp.asarray(lat),
                       lon_prob=jnp.asarray(lon))

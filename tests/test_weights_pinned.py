@@ -78,7 +78,7 @@ def test_every_group_and_array_must_match_the_network(params):
         _refused(_file(params | {"op": params["op"] | {"bias": value}}), bad)
 
 
-def test_the_variant_comes_from_the_file(tmp_path):
+def test_the_variant_comes_from_the_file():
     maneuver = _params(True)
     model = model_from_bytes(_file(maneuver, maneuvers=True), "w.msgpack")
     assert model.maneuvers is True
@@ -151,7 +151,7 @@ def test_a_state_dict_is_refused_with_the_first_fault(params):
         assert str(info.value) == reason
 
 
-def test_weights_are_saved_as_float32_whatever_the_network_runs_in(tmp_path, params):
+def test_weights_are_saved_as_float32_whatever_the_network_runs_in(tmp_path):
     import jax.numpy as jnp
 
     from diffsense.predictors import init_predictor
@@ -164,7 +164,7 @@ def test_weights_are_saved_as_float32_whatever_the_network_runs_in(tmp_path, par
     assert read_card(tmp_path / "w.msgpack") == {"note": "x"}
 
 
-def test_conversion_is_float32_both_ways(params):
+def test_conversion_is_float32_both_ways():
     import jax.numpy as jnp
 
     from diffsense.predictors import init_predictor
