@@ -24,7 +24,7 @@ import pytest
 from diffsense import _random
 from diffsense.config import replace
 from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams
-from diffsense.scene._traffic import traffic_step
+from diffsense.scene._traffic import _neighbours, traffic_step
 from diffsense.scene._traffic_config import TrafficConfig
 from diffsense.scene._traffic_state import DT_S, TrafficState, init_traffic
 
@@ -260,3 +260,22 @@ def test_blocked_in_the_middle_lane_with_both_sides_free_the_driver_keeps_right(
     got, held = step_both(vehicles, hand_state(vehicles, s, speed, np.repeat(np.arange(3), 4)))
     target = np.asarray(got.target_lane)
     assert target[4] == 0 and held == 0
+
+
+def test_neighbour_tables_match_the_loops_with_a_vehicle_half_a_metre_ahead_in_the_next_lane():
+    """Vehicle 4 (lane 1) has vehicle 0 (lane 0) 0.5 m ahead: 0 leads it in lane 0 and is not
+    also its follower there; the follower is the nearest behind (vehicle 3, around the ring).
+    Vehicle 8 (lane 2) is exactly abreast: both leader and follower there, 0 m away."""
+    vehicles, _ = init_traffic(CFG, jax.random.key(0), jnp.float64)
+    ring = float(vehicles.ring_length_m)
+    s = np.array([0.5, 0.2, 0.45, 0.7, 0.0, 0.3, 0.5, 0.7, 0.1, 0.35, 0.6, 0.85]) * ring
+    s[[0, 8]] = 0.5, 0.0
+    state = hand_state(vehicles, s, np.full(12, 20.0), np.repeat(np.arange(3), 4))
+    got = jax.jit(_neighbours)(state, vehicles)
+    leader, lead_d, follower, foll_d = neighbours(state, ring)
+    np.testing.assert_array_equal(np.asarray(got[0]), np.where(np.equal(leader, None), 0, leader).astype(int))
+    np.testing.assert_array_equal(np.asarray(got[3]), np.where(np.equal(follower, None), 0, follower).astype(int))
+    np.testing.assert_allclose(np.asarray(got[1]), np.asarray(lead_d, float), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(got[4]), np.asarray(foll_d, float), rtol=1e-12)
+    assert (leader[4][0], lead_d[4][0]) == (0, 0.5) and follower[4][0] == 3
+    assert (leader[4][2], lead_d[4][2], follower[4][2], foll_d[4][2]) == (8, 0.0, 8, 0.0)
