@@ -162,7 +162,8 @@ def test_lateral_offset_follows_the_quintic_from_lane_to_target(since_s, progres
     d = float(lateral_offset_m(state, 3.5)[0])
     assert d == pytest.approx(2.5 * 3.5 - progress * 3.5, abs=1e-12)
     traj = TrafficTrajectories(*(jnp.asarray([[x]]) for x in (0.0, d, 20.0, 2, 1)), vehicles=None)
-    assert int(traj.centre_lane(3.5)[0, 0]) == (2 if d >= 7.0 else 1)
+    lane = traj.centre_lane(3.5)
+    assert lane.dtype == jnp.int32 and int(lane[0, 0]) == (2 if d >= 7.0 else 1)
 
 
 def test_a_simulation_records_the_states_after_the_warm_up_step_by_step():
