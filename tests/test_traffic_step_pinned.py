@@ -86,8 +86,8 @@ def neighbours(state, ring):
 
 
 def ref_step(cfg, vehicles, state, key):
-    """The next TrafficState as plain numpy arrays, vehicle by vehicle, and how many starters a
-    close one held back."""
+    """({"held": starters a close one held back, "incentive": [V, 3] MOBIL incentive per side with
+    the route bias}, the next TrafficState as plain numpy arrays), vehicle by vehicle."""
     lc, n_lanes = cfg.lane_change, cfg.road.num_lanes
     g = {f: np.asarray(getattr(state, f)) for f in ("s_m", "speed_mps", "lane", "target_lane", "since_change_s",
                                                     "change_duration_s", "desired_speed_mps", "preferred_lane")}
@@ -104,7 +104,7 @@ def ref_step(cfg, vehicles, state, key):
     accel_r = [[towards(i, leader[i][r], lead_d[i][r]) for r in range(3)] for i in range(n)]
     accel = [min(accel_r[i][1], accel_r[i][min(max(target[i] - lane[i] + 1, 0), 2)]) for i in range(n)]
 
-    want, score = np.zeros((n, 3), bool), np.zeros((n, 3))
+    want, score, incentives = np.zeros((n, 3), bool), np.zeros((n, 3)), np.zeros((n, 3))
     for i in range(n):
         ready = target[i] == lane[i] and g["since_change_s"][i] >= g["change_duration_s"][i] + lc.cooldown_s
         old_f, own_l = follower[i][1], leader[i][1]
@@ -132,7 +132,7 @@ def ref_step(cfg, vehicles, state, key):
             want[i, r] = (ready and 0 <= lane[i] + r - 1 < n_lanes and lead_gap > lc.min_gap_m
                           and foll_gap > lc.min_gap_m and n_after >= -lc.safe_decel_mps2
                           and incentive > lc.threshold_mps2 + bias)
-            score[i, r] = incentive - bias
+            score[i, r], incentives[i, r] = incentive - bias, incentive
     go_left = want[:, 2] & (~want[:, 0] | (score[:, 2] > score[:, 0]))
     starts = want[:, 0] | want[:, 2]
     new_target = np.where(starts, lane + np.where(go_left, 1, -1), target)
@@ -157,7 +157,7 @@ def ref_step(cfg, vehicles, state, key):
     new_v0 = np.minimum(float(vehicles.mean_desired_speed_mps) * (f_lo + (f_hi - f_lo) * u[2]),
                         np.asarray(vehicles.max_desired_speed_mps))
     new_pref = np.minimum(np.floor(u[4] * n_lanes).astype(int), n_lanes - 1)
-    return held, {
+    return {"held": held, "incentive": incentives}, {
         "s_m": s + np.where(v_new < 0.0, stop_m, v * DT_S + 0.5 * accel * DT_S**2),
         "speed_mps": np.maximum(v_new, 0.0),
         "lane": np.where((new_target != lane) & (since >= duration), new_target, lane),
@@ -223,10 +223,10 @@ def step_both(vehicles, state):
     """`traffic_step` checked against the loops; (next state, starters held back)."""
     key = jax.random.key(3)
     got = jax.jit(traffic_step, static_argnums=0)(CFG, vehicles, state, key)
-    held, want = ref_step(CFG, vehicles, state, key)
+    info, want = ref_step(CFG, vehicles, state, key)
     for name, value in want.items():
         np.testing.assert_allclose(np.asarray(getattr(got, name)), value, rtol=1e-12, atol=1e-12, err_msg=name)
-    return got, held
+    return got, info["held"]
 
 
 @pytest.mark.parametrize(("apart_m", "both_go"), [(10.0, False), (40.0, True)])
@@ -244,6 +244,26 @@ def test_two_close_starters_into_one_lane_only_the_lower_index_goes(apart_m, bot
     target = np.asarray(got.target_lane)
     np.testing.assert_array_equal(target[[0, 8]], [1, 1] if both_go else [1, 2])
     assert np.sum(target != np.repeat(np.arange(3), 4)) == (2 if both_go else 1)
+
+
+def test_a_start_flips_where_the_incentive_crosses_the_threshold_and_keep_right_bias():
+    """The scene above 40 m apart: vehicle 0 heads left, vehicle 8 right. With a_th set 1e-6 either
+    side of incentive - bias (left) or incentive + bias (right) each goes or stays: this pins both
+    incentives and the keep-right bias in MOBIL's test."""
+    vehicles, _ = init_traffic(CFG, jax.random.key(0), jnp.float64)
+    s = np.array([0.0, 0.3, 0.5, 0.75, 0.3, 0.45, 0.6, 0.75, 0.0, 0.25, 0.5, 0.75]) * float(vehicles.ring_length_m)
+    s[8] = 40.0
+    preferred = np.repeat(np.arange(3), 4)
+    preferred[[0, 8]] = [2, 0]
+    state = hand_state(vehicles, s, np.full(12, 20.0), preferred)
+    key = jax.random.key(3)
+    info, _ = ref_step(CFG, vehicles, state, key)
+    bias = CFG.lane_change.keep_right_bias_mps2
+    for vehicle, edge in ((0, info["incentive"][0, 2] - bias), (8, info["incentive"][8, 0] + bias)):
+        for shift in (-1e-6, 1e-6):
+            cfg = replace(CFG, lane_change=replace(CFG.lane_change, threshold_mps2=float(edge + shift)))
+            got = jax.jit(traffic_step, static_argnums=0)(cfg, vehicles, state, key)
+            assert (int(got.target_lane[vehicle]) != int(state.lane[vehicle])) == (shift < 0), (vehicle, shift)
 
 
 def test_blocked_in_the_middle_lane_with_both_sides_free_the_driver_keeps_right():
