@@ -141,6 +141,27 @@ def test_over_many_draws_lanes_start_anywhere_and_free_length_is_shared_by_weigh
     assert max(ratios) <= 3.0 and max(ratios) > 2.5  # shares of U(0.5, 1.5) weights: at most 3 to 1
 
 
+KIND_FIELDS = ("length_m", "width_m", "time_headway_s", "min_gap_m", "max_accel_mps2", "comfort_decel_mps2")
+
+
+def test_over_many_draws_each_size_and_driver_parameter_spans_its_interval_independently():
+    """Where each of the six per-kind draws lies in its kind's interval (0 = lo, 1 = hi), over 64
+    simulations: every field reaches both ends, and no two fields share their random numbers."""
+    vehicles, _ = jax.jit(jax.vmap(lambda key: init_traffic(CFG, key, jnp.float64)))(
+        jax.random.split(jax.random.key(8), 64))
+    kind = np.asarray(vehicles.kind).ravel()
+    quantiles = []
+    for field in KIND_FIELDS:
+        value = np.asarray(getattr(vehicles, field) if field in ("length_m", "width_m")
+                           else getattr(vehicles.idm, field)).ravel()
+        lo, hi = (np.array([getattr(k, field)[end] for k in CFG.kinds])[kind] for end in (0, 1))
+        q = (value - lo) / (hi - lo)
+        assert q.min() >= 0.0 and q.max() <= 1.0 + 1e-12 and q.min() < 0.01 and q.max() > 0.99, field
+        quantiles.append(q)
+    correlation = np.corrcoef(quantiles)
+    assert np.abs(correlation - np.eye(6)).max() < 0.15, correlation
+
+
 def test_a_density_too_high_for_the_drawn_vehicles_lengthens_the_ring_to_1_05_of_the_longest_lane():
     trucks = replace(CFG, traffic=replace(CFG.traffic, density_veh_per_km_lane=(70.0, 80.0),
                                           kind_probabilities=(0.0, 0.0, 1.0)))
