@@ -101,7 +101,7 @@ def _tracks_meta(path: Path) -> dict[int, tuple[float, float, int, int]]:
         if direction not in (1.0, 2.0):
             raise InputError(f"{path}, line {line}: drivingDirection must be 1 or 2, got {direction}")
         if kind is None:
-            raise InputError(f"{path}, line {line}: class must be Car or Truck, got {cols['class'][i]!r}")
+            raise InputError(f"{path}, line {line}: class must be Car or Truck, got {str(cols['class'][i])!r}")
         meta[int(ids[i])] = (float(length), float(width), kind, int(direction))
     return meta
 
