@@ -60,6 +60,11 @@ def test_line_count_counts_a_last_line_without_a_newline(tmp_path, text, count):
     assert _line_count(write(tmp_path, text)) == count
 
 
+def test_line_count_adds_up_over_a_file_longer_than_its_one_mebibyte_chunks(tmp_path):
+    path = write(tmp_path, "x\n" + "1.5\n" * 400_000)  # 1.6 MB: two chunks
+    assert _line_count(path) == 400_001
+
+
 def test_blank_lines_are_skipped_and_rows_keep_their_file_lines(tmp_path):
     path = write(tmp_path, "id,name,x\n\n1, car ,2.5\n  ,  ,  \n2,truck,3\n")
     cols, lines = read_columns(path, ("x", "id"), ("name",))
