@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from diffsense.errors import InputError
+from diffsense.scene import _recorded_csv
 from diffsense.scene._recorded_csv import (
     _fast_numbers,
     _line_count,
@@ -42,6 +43,27 @@ def test_numbers_only_go_through_numpys_reader_in_the_asked_order(tmp_path):
     cols, lines = _fast_numbers(path, ("x",), [2])
     np.testing.assert_array_equal(cols["x"], [0.5, 1.5, 1000.0])
     np.testing.assert_array_equal(lines, [2, 3, 4])
+
+
+def test_the_public_reader_takes_numpys_path_for_numbers_only_and_never_for_text(tmp_path, monkeypatch):
+    calls = []
+
+    def spy(*args):
+        calls.append(_fast_numbers(*args))
+        return calls[-1]
+
+    monkeypatch.setattr(_recorded_csv, "_fast_numbers", spy)
+    read_columns(write(tmp_path, PLAIN), ("x", "id"))
+    assert len(calls) == 1 and calls[0] is not None
+    read_columns(write(tmp_path, "id,name\n1,car\n", "text.csv"), ("id",), ("name",))
+    assert len(calls) == 1
+
+
+def test_a_quoted_text_cell_keeps_its_line_break_as_written(tmp_path):
+    # The csv module needs files opened with newline="" to read a quoted CR LF as it is.
+    cols, lines = read_columns(write(tmp_path, 'id,note\r\n1,"two\r\nlines"\r\n2,one\r\n'), ("id",), ("note",))
+    assert cols["note"].tolist() == ["two\r\nlines", "one"]
+    np.testing.assert_array_equal(lines, [3, 4])  # the file line where each row ends
 
 
 @pytest.mark.parametrize("text", [
