@@ -5,11 +5,13 @@ message.
 
 from __future__ import annotations
 
+import _recorded_files as files
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from diffsense.errors import InputError
-from diffsense.scene import CAR, TRUCK
+from diffsense.scene import CAR, TRUCK, load_highd, load_ngsim
 from diffsense.scene._highd import read_highd
 from diffsense.scene._ngsim import read_ngsim
 
@@ -147,3 +149,14 @@ def test_highd_files_are_found_by_name(tmp_path):
     with pytest.raises(InputError) as e:
         read_highd(path)
     assert str(e.value) == f"{tmp_path / '01_tracksMeta.csv'}, line 2: width and height must be > 0 m, got 0.0 and 2.0"
+
+
+@pytest.mark.parametrize("kind", ["ngsim", "highd"])
+def test_the_loaders_pass_every_window_option_on(tmp_path, kind):
+    # The shared recording: the target holds its first lane for 10 s, then crosses at t = 10 s.
+    load, path = (load_ngsim, files.write_ngsim(tmp_path)) if kind == "ngsim" else (load_highd, files.write_highd(tmp_path))
+    with pytest.raises(InputError, match="a lane id held 12.0 s after another"):
+        load(path, hold_s=12.0)
+    (scene,) = load(path, duration_s=10.0, crossing_at_s=2.0, dtype=jnp.float64)
+    assert scene.s_m.shape == (101, 5) and scene.s_m.dtype == jnp.float64
+    assert scene.lane[:, 1].tolist() == [2] * 20 + [1] * 81  # in the new lane from 2 s on
