@@ -122,12 +122,18 @@ def test_highd_lanes_count_the_markings_between_the_right_edge_and_the_centre(tm
     ({"direction": "3"}, "01_tracksMeta.csv, line 3", "drivingDirection must be 1 or 2, got 3.0"),
     ({"truck": "Bus"}, "01_tracksMeta.csv, line 3", "class must be Car or Truck, got 'Bus'"),
     ({"tracks": TRACKS + "3,9,1,1,1,1\n"}, "01_tracks.csv, line 6", "vehicle id 9 is not in 01_tracksMeta.csv"),
+    ({"tracks": TRACKS + "3.5,1,1,1,1,1\n"}, "01_tracks.csv, line 6", "column 'frame' must be a whole number, got 3.5"),
+    ({"tracks": TRACKS + "4,1,1,1,1,1.5\n"}, "01_tracks.csv, line 6", "column 'laneId' must be a whole number, got 1.5"),
 ])
 def test_highd_refusals(tmp_path, edit, where, message):
     path = highd(tmp_path, **edit)
     with pytest.raises(InputError) as e:
         read_highd(path)
     assert str(e.value) == f"{tmp_path / where.split(',')[0]},{where.split(',', 1)[1]}: {message}"
+
+
+def test_highd_any_positive_frame_rate_is_read(tmp_path):
+    assert read_highd(highd(tmp_path, rate="0.5")).frame_rate_hz == 0.5
 
 
 def test_highd_files_are_found_by_name(tmp_path):
