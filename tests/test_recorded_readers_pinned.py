@@ -71,9 +71,10 @@ META = "id,width,height,initialFrame,class,drivingDirection\n1,4.5,2,1,Car,2\n2,
 TRACKS = "frame,id,x,y,xVelocity,laneId\n1,1,100,17,30,6\n2,1,101.2,17.1,30,6\n1,2,200,5.2,-25,2\n2,2,199,5.3,-25,3\n"
 
 
-def highd(tmp_path, upper="2;5.5;9", lower="13;16.5;20", truck="Truck", direction="1", tracks=TRACKS, rate="25"):
+def highd(tmp_path, upper="2;5.5;9", lower="13;16.5;20", truck="Truck", direction="1", tracks=TRACKS, rate="25",
+          meta=META):
     (tmp_path / "01_recordingMeta.csv").write_text(RECORDING.format(upper=upper, lower=lower).replace(",25,", f",{rate},"))
-    (tmp_path / "01_tracksMeta.csv").write_text(META.format(truck=truck, direction=direction))
+    (tmp_path / "01_tracksMeta.csv").write_text(meta.format(truck=truck, direction=direction))
     path = tmp_path / "01_tracks.csv"
     path.write_text(tracks)
     return path
@@ -121,6 +122,8 @@ def test_highd_lanes_count_the_markings_between_the_right_edge_and_the_centre(tm
     ({"rate": "0"}, "01_recordingMeta.csv, line 2", "frameRate must be > 0, got 0.0"),
     ({"direction": "3"}, "01_tracksMeta.csv, line 3", "drivingDirection must be 1 or 2, got 3.0"),
     ({"truck": "Bus"}, "01_tracksMeta.csv, line 3", "class must be Car or Truck, got 'Bus'"),
+    ({"meta": META.replace("\n2,12,", "\n2.5,12,")}, "01_tracksMeta.csv, line 3",
+     "column 'id' must be a whole number, got 2.5"),
     ({"tracks": TRACKS + "3,9,1,1,1,1\n"}, "01_tracks.csv, line 6", "vehicle id 9 is not in 01_tracksMeta.csv"),
     ({"tracks": TRACKS + "3.5,1,1,1,1,1\n"}, "01_tracks.csv, line 6", "column 'frame' must be a whole number, got 3.5"),
     ({"tracks": TRACKS + "4,1,1,1,1,1.5\n"}, "01_tracks.csv, line 6", "column 'laneId' must be a whole number, got 1.5"),

@@ -14,10 +14,10 @@ from diffsense.scene import CAR, load_recorded
 from diffsense.scene._recorded import Recording, Track, cut_window, recorded_scenes
 
 
-def track(vehicle_id, frames, s0, lane_id):
+def track(vehicle_id, frames, s0, lane_id, metres_per_frame=2.0):
     frame = np.asarray(frames)
     lane_id = np.asarray(lane_id)
-    return Track(vehicle_id=vehicle_id, frame=frame, s_m=s0 + 2.0 * frame, d_m=(3 - lane_id + 0.5) * 3.5,
+    return Track(vehicle_id=vehicle_id, frame=frame, s_m=s0 + metres_per_frame * frame, d_m=(3 - lane_id + 0.5) * 3.5,
                  speed_mps=np.full(frame.shape, 20.0), lane=3 - lane_id, lane_id=lane_id, length_m=4.5,
                  width_m=1.8, kind=CAR, carriageway=0)
 
@@ -41,6 +41,14 @@ def test_a_vehicle_recorded_exactly_over_the_window_is_kept_and_one_frame_short_
     np.testing.assert_allclose(scene.s_m[:, 2], 2.0 * np.arange(30, 111), rtol=1e-15)
     for name in ("d_m", "x_m", "y_m", "heading_rad", "road_angle_rad", "speed_mps", "lane"):
         assert getattr(scene, name).shape == (81, 3), name
+
+
+def test_the_ego_is_strictly_behind_the_target_at_the_windows_first_frame():
+    # Vehicle 5, in the lane the target enters, is abreast of it at the window's first frame
+    # (frame 30, s = 100 m) and behind it from the next frame on (it drives 1 m a frame, not 2).
+    rec = Recording(path="hand", frame_rate_hz=10.0, tracks=(*REC.tracks, track(5, FRAMES, 70.0, np.ones_like(FRAMES), 1.0)))
+    _, (info,) = recorded_scenes(rec, duration_s=8.0, crossing_at_s=2.0, dtype=jnp.float64)
+    assert info.vehicle_ids[:2] == (2, 1)
 
 
 def test_cut_window_alone_gives_the_scene_recorded_scenes_gives():
