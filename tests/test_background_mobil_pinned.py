@@ -11,6 +11,7 @@ by hand in tests/test_scene_models_pinned.py). The hand scenes check what a driv
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -141,8 +142,7 @@ def hand_scene(*vehicles, min_gap_m=2.2):
     s, lane, v, length = (np.array(x, float) for x in zip(*vehicles))
     centre = (lane + 0.5) * W
     scene = {"s": s, "d": centre, "centre": centre, "v": v, "length": length, "a": np.zeros(len(s))}
-    idm = idm_params([33.0] * len(s), [1.2] * len(s))
-    idm = IDMParams(*(getattr(idm, f) for f in IDM_FIELDS[:2]), jnp.asarray(min_gap_m), *(getattr(idm, f) for f in IDM_FIELDS[3:]))
+    idm = dataclasses.replace(idm_params([33.0] * len(s), [1.2] * len(s)), min_gap_m=jnp.asarray(min_gap_m))
     for c in range(len(s)):
         leader, gap = ref_nearest(c, centre[c], scene, ahead=True)
         scene["a"][c] = float(idm_acceleration(v[c], gap, v[leader if leader is not None else c], vehicle_idm(idm, c)))
