@@ -33,6 +33,8 @@ REFUSED = [
      "traffic.density_veh_per_km_lane: [10.0, 150.5] is outside the allowed range [-inf, 150.0]"),
     (TrafficRanges, {"desired_speed_mps": (20.0, 60.5)},
      "traffic.desired_speed_mps: [20.0, 60.5] is outside the allowed range [-inf, 60.0]"),
+    (TrafficRanges, {"desired_speed_mps": (0.0, 30.0)}, "traffic.desired_speed_mps: must be > 0, got [0.0, 30.0]"),
+    (TrafficRanges, {"speed_change_factor": (0.0, 1.0)}, "traffic.speed_change_factor: must be > 0, got [0.0, 1.0]"),
     (TrafficRanges, {"desired_speed_spread": -0.1}, "traffic.desired_speed_spread: must be in [0, 1), got -0.1"),
     (TrafficRanges, {"desired_speed_spread": 1.0}, "traffic.desired_speed_spread: must be in [0, 1), got 1.0"),
     (TrafficRanges, {"speed_change_rate_per_s": -0.01}, "traffic.speed_change_rate_per_s: must be >= 0, got -0.01"),
@@ -95,6 +97,8 @@ def test_each_limit_is_accepted_on_its_inside(cls, edit):
     ("car", "length_m", (0.0, 5.0), "car.length_m: must be > 0, got [0.0, 5.0]"),
     ("van", "length_m", (5.0, 30.5), "van.length_m: [5.0, 30.5] is outside the allowed range [-inf, 30.0]"),
     ("truck", "width_m", (2.4, 3.7), "truck.width_m: [2.4, 3.7] is outside the allowed range [-inf, 3.66]"),
+    ("van", "width_m", (0.0, 2.0), "van.width_m: must be > 0, got [0.0, 2.0]"),
+    ("truck", "max_accel_mps2", (0.0, 0.5), "truck.max_accel_mps2: must be > 0, got [0.0, 0.5]"),
     ("car", "max_desired_speed_mps", 0.0, "car.max_desired_speed_mps: must be > 0, got 0.0"),
     ("car", "time_headway_s", (0.0, 1.0), "car.time_headway_s: must be > 0, got [0.0, 1.0]"),
     ("van", "min_gap_m", (-1.0, 1.0), "van.min_gap_m: must be > 0, got [-1.0, 1.0]"),
@@ -110,7 +114,8 @@ def test_each_kind_is_checked_by_name_against_the_lane_width(kind, field, value,
 
 
 def test_a_ring_shorter_than_60_m_is_refused_by_the_vehicles_it_would_need():
-    # 2 vehicles per lane at up to 40 veh/km make a 50 m ring; 3 make 75 m.
+    # 2 vehicles per lane at up to 40 veh/km make a 50 m ring; 3 make 75 m; at 50.04 veh/km,
+    # 59.95 m.
     with pytest.raises(InputError) as e:
         replace(BASE, road=replace(BASE.road, vehicles_per_lane=2),
                 traffic=replace(BASE.traffic, density_veh_per_km_lane=(10.0, 40.0)))
@@ -118,6 +123,9 @@ def test_a_ring_shorter_than_60_m_is_refused_by_the_vehicles_it_would_need():
                             "(the social grid would see a vehicle around the ring): add vehicles")
     replace(BASE, road=replace(BASE.road, vehicles_per_lane=3), traffic=replace(BASE.traffic, density_veh_per_km_lane=(10.0, 40.0)))
     replace(BASE, road=replace(BASE.road, vehicles_per_lane=3), traffic=replace(BASE.traffic, density_veh_per_km_lane=(10.0, 50.0)))
+    with pytest.raises(InputError, match="make a 60 m ring, shorter than 60 m"):
+        replace(BASE, road=replace(BASE.road, vehicles_per_lane=3),
+                traffic=replace(BASE.traffic, density_veh_per_km_lane=(10.0, 50.04)))
 
 
 def test_kinds_in_scene_order_and_the_vehicle_count():
