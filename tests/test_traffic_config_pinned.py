@@ -109,8 +109,10 @@ def test_each_kind_is_checked_by_name_against_the_lane_width(kind, field, value,
     with pytest.raises(InputError) as e:
         replace(BASE, **{kind: replace(getattr(BASE, kind), **{field: value})})
     assert str(e.value) == message
-    # The width may fill the lane exactly.
-    replace(BASE, truck=replace(BASE.truck, width_m=(2.4, 3.66)))
+
+
+def test_a_kind_may_be_as_wide_as_the_lane():
+    assert replace(BASE, truck=replace(BASE.truck, width_m=(2.4, 3.66))).truck.width_m == (2.4, 3.66)
 
 
 def test_a_ring_shorter_than_60_m_is_refused_by_the_vehicles_it_would_need():
