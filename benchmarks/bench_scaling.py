@@ -2,7 +2,8 @@
 
     python benchmarks/bench_scaling.py [--variants 8,16,32,64,128,256] [--base-scenarios 6]
         [--scenarios 1,2,4,6] [--base-variants 8] [--devices 1,4] [--sensor radar]
-        [--param hfov_deg] [--at 60] [--repeats 5] [--timeout-s 3600] [--json PATH]
+        [--param hfov_deg] [--interval 30 180] [--at 60] [--repeats 5] [--timeout-s 3600]
+        [--json PATH]
 
 Rows: every count in --variants (scene variants per scenario) at the first --base-scenarios of
 the paper's six scenarios, then every count in --scenarios at --base-variants variants; each
@@ -23,7 +24,9 @@ is imported, so D simulated CPU devices split the host's cores between them. In 
   calls both programs, in a shuffled order;
 - ratio = value+grad / value (issue #14's target: <= 2.5); reverse = the same ratio for
   reverse mode (`jax.value_and_grad`, what a problem of several parameters runs), timed in the
-  same rounds;
+  same rounds; forward = the same ratio for forward mode with one tangent per parameter
+  (`jax.jvp` vmapped over the k unit tangents inside `forward_mode()`), the alternative to
+  reverse mode that a problem of k > 1 parameters has (with one parameter it is `ratio`);
 - per scene [ms]: value+grad divided by the scenes (variants x scenarios);
 - peak RSS [MB]: ru_maxrss of the worker process (imports, build, compile and runs together).
 A configuration that fails (out of memory, --timeout-s) is reported as a row with its error
@@ -47,7 +50,7 @@ RATIO_TARGET = 2.5  # issue #14: one value-and-gradient evaluation <= 2.5x one v
 LOAD_WARNING = 1.5
 MAX_SCENARIOS = 6  # the paper's six (diffsense.metrics.PAPER_SCENARIOS), taken in order
 COLUMNS = ("devices", "variants", "scenarios", "scenes", "build [s]", "compile value / v+g [s]", "value [s]",
-           "value+grad [s]", "ratio", "reverse", "v+g per scene [ms]", "peak RSS [MB]")
+           "value+grad [s]", "ratio", "reverse", "forward", "v+g per scene [ms]", "peak RSS [MB]")
 
 
 def _ints(text: str) -> list[int]:
@@ -73,6 +76,8 @@ def _programs(objective, r: dict) -> tuple[dict, dict[str, float]]:
     value = lambda a, r: eqx.combine(a, static).e2(r)  # noqa: E731
     jobs = {"value": value, "value_and_grad": lambda a, r: value_and_grad(lambda q: value(a, q))(r),
             "reverse": jax.value_and_grad(value, argnums=1)}
+    if len(jax.tree.leaves(r)) > 1:
+        jobs["forward"] = lambda a, r: _forward_tangents(lambda q: value(a, q), r)
     fns, compile_s = {}, {}
     for name, fn in jobs.items():
         t0 = time.perf_counter()
@@ -80,6 +85,23 @@ def _programs(objective, r: dict) -> tuple[dict, dict[str, float]]:
         compile_s[name] = time.perf_counter() - t0
         fns[name] = lambda exe=exe: jax.block_until_ready(exe(arrays, r))
     return fns, compile_s
+
+
+def _forward_tangents(fn, r: dict):
+    """(fn(r), its gradient) in forward mode: one tangent per number of r, `jax.jvp` vmapped."""
+    import jax
+    import jax.numpy as jnp
+
+    from diffsense.predictors import forward_mode
+
+    leaves, treedef = jax.tree.flatten(r)
+
+    def along(unit):
+        with forward_mode():
+            return jax.jvp(fn, (r,), (jax.tree.unflatten(treedef, list(unit)),))
+
+    value, slopes = jax.vmap(along, out_axes=(None, 0))(jnp.eye(len(leaves), dtype=leaves[0].dtype))
+    return value, jax.tree.unflatten(treedef, list(slopes))
 
 
 def worker(args) -> dict:
@@ -91,13 +113,15 @@ def worker(args) -> dict:
     from diffsense.metrics import PAPER_SCENARIOS
 
     load_before = os.getloadavg()[0]
-    problem = ds.Problem.from_toml(sensor=args.sensor, params={args.param: tuple(args.interval)},
+    names = args.param.split(",")
+    intervals = {name: tuple(args.interval[2 * k : 2 * k + 2]) for k, name in enumerate(names)}
+    problem = ds.Problem.from_toml(sensor=args.sensor, params=intervals,
                                    scenarios=PAPER_SCENARIOS[:args.worker_scenarios], variants=args.worker_variants)
     t0 = time.perf_counter()
     objective = ds.objective(problem)
     jax.block_until_ready(objective)
     build_s = time.perf_counter() - t0
-    r = {name: jax.numpy.asarray(args.at, objective.dtype) for name in problem.params}
+    r = {name: jax.numpy.asarray(at, objective.dtype) for name, at in zip(problem.params, args.at, strict=True)}
     fns, compile_s = _programs(objective, r)
     median_s = _time_interleaved(fns, args.repeats, pause_s=0.0)
     scenes = args.worker_variants * len(problem.scenarios)
@@ -108,7 +132,8 @@ def worker(args) -> dict:
         "compile_value_s": compile_s["value"], "compile_value_and_grad_s": compile_s["value_and_grad"],
         "value_s": median_s["value"], "value_and_grad_s": median_s["value_and_grad"],
         "ratio": median_s["value_and_grad"] / median_s["value"],
-        "reverse_ratio": median_s["reverse"] / median_s["value"],
+        "reverse_ratio": median_s["reverse"] / median_s["value"], "params": list(problem.params),
+        "forward_ratio": median_s.get("forward", median_s["value_and_grad"]) / median_s["value"],
         "value_and_grad_per_scene_ms": 1e3 * median_s["value_and_grad"] / scenes,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "repeats": args.repeats, "load_before": load_before, "load_after": os.getloadavg()[0],
@@ -118,7 +143,7 @@ def worker(args) -> dict:
 def _worker_command(args, devices: int, variants: int, scenarios: int) -> tuple[list[str], dict]:
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "--worker-variants", str(variants),
            "--worker-scenarios", str(scenarios), "--sensor", args.sensor, "--param", args.param,
-           "--interval", *map(str, args.interval), "--at", str(args.at), "--repeats", str(args.repeats)]
+           "--interval", *map(str, args.interval), "--at", *map(str, args.at), "--repeats", str(args.repeats)]
     flags = os.environ.get("XLA_FLAGS", "")
     env = dict(os.environ, XLA_FLAGS=f"{flags} --xla_force_host_platform_device_count={devices}".strip())
     if args.platform:
@@ -150,8 +175,12 @@ def _cells(row: dict) -> list[str]:
     if "error" in row:
         return head + [f"failed: {row['error']}"] + [""] * (len(COLUMNS) - len(head) - 1)
     return head + [f"{row['build_s']:.1f}", f"{row['compile_value_s']:.1f} / {row['compile_value_and_grad_s']:.1f}",
-                   f"{row['value_s']:.3f}", f"{row['value_and_grad_s']:.3f}", f"{row['ratio']:.2f}", f"{row['reverse_ratio']:.2f}",
+                   f"{row['value_s']:.3f}", f"{row['value_and_grad_s']:.3f}", f"{row['ratio']:.2f}", f"{row['reverse_ratio']:.2f}", _forward_cell(row),
                    f"{row['value_and_grad_per_scene_ms']:.1f}", f"{row['peak_rss_mb']:.0f}"]
+
+
+def _forward_cell(row: dict) -> str:
+    return f"{row['forward_ratio']:.2f}" if "forward_ratio" in row else "-"  # rows from before the column
 
 
 def table(rows: list[dict]) -> str:
@@ -177,9 +206,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--devices", default="1,4", help="JAX device counts (simulated host devices)")
     p.add_argument("--platform", default="cpu", help="JAX_PLATFORMS of the workers ('' leaves it unset)")
     p.add_argument("--sensor", default="radar")
-    p.add_argument("--param", default="hfov_deg", help="the free parameter (the sensor's name for it)")
-    p.add_argument("--interval", type=float, nargs=2, default=(30.0, 180.0), help="its bounds")
-    p.add_argument("--at", type=float, default=60.0, help="the point r every call evaluates")
+    p.add_argument("--param", default="hfov_deg",
+                   help="the free parameters (the sensor's names for them), comma-separated")
+    p.add_argument("--interval", type=float, nargs="+", default=(30.0, 180.0),
+                   help="their bounds, two numbers per parameter")
+    p.add_argument("--at", type=float, nargs="+", default=(60.0,), help="the point r every call evaluates")
     p.add_argument("--repeats", type=int, default=5, help="timed rounds per configuration")
     p.add_argument("--timeout-s", type=float, default=3600.0, help="limit per configuration")
     p.add_argument("--json", default=None, help="also write the rows and the machine's load here")
@@ -195,6 +226,10 @@ def main() -> None:
     counts = [args.base_scenarios, *_ints(args.scenarios)]
     if not all(1 <= s <= MAX_SCENARIOS for s in counts):
         parser.error(f"scenario counts must lie in 1..{MAX_SCENARIOS}, got {counts}")
+    k = len(args.param.split(","))
+    if len(args.interval) != 2 * k or len(args.at) != k:
+        parser.error(f"{k} parameter(s) need {2 * k} --interval numbers and {k} --at, "
+                     f"got {len(args.interval)} and {len(args.at)}")
     if args.worker:
         print(json.dumps(worker(args)))
         return
