@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.config import replace
+from diffsense.config import default_text, replace
 from diffsense.errors import InputError
 from diffsense.scene import (
     ADJACENT,
@@ -205,7 +205,7 @@ def _write(tmp_path, text):
     ],
 )
 def test_config_rejects_with_one_line(tmp_path, edit, needle):
-    text = (load_scenario.__globals__["load_default"].__globals__["default_text"])("scenarios/sc01.toml")
+    text = default_text("scenarios/sc01.toml")
     assert edit[0] in text
     with pytest.raises(InputError) as e:
         load_scenario(_write(tmp_path, text.replace(edit[0], edit[1], 1)))
