@@ -1,0 +1,121 @@
+"""The scene viewer's data pinned on hand-built scenes: the road's pieces as plain numbers (an arc's
+end worked out from its radius), a scene's JSON (absent vehicles left out, millimetre rounding),
+a body's outline, the frame of the lane change and what the figure draws around it.
+"""
+
+from __future__ import annotations
+
+import matplotlib.colors as mcolors
+import numpy as np
+import pytest
+
+from diffsense.scene import load_road
+from diffsense.scene._datatypes import BACKGROUND, CAR, EGO, TARGET, TRUCK, VAN, Scene
+from diffsense.scene._view import (
+    ROLE_COLOURS,
+    _lane_change_frame,
+    _outline,
+    road_json,
+    scene_figure,
+    scene_json,
+)
+
+T, LANE_W = 101, 3.66
+PEAK = 60  # the frame after which the target moves sideways fastest
+
+
+def _scene(lane_change: bool = True) -> Scene:
+    """Ego, target, two background cars and one absent slot on the straight road, 10 s at 10 Hz."""
+    t = np.arange(T) * 0.1
+    s = np.stack([20.0 + 25.0 * t, 35.0 + 26.0 * t, 5.0 + 24.0 * t, 12.345649 + 20.0 * t, np.zeros(T)], -1)
+    step = np.zeros(T - 1)
+    if lane_change:  # a lateral move over frames 45..75, fastest between frames 60 and 61
+        step[45:76] = LANE_W * (1.0 - np.abs(np.arange(45, 76) - PEAK) / 16.0) / 16.0
+    d_target = 1.5 * LANE_W + np.concatenate([[0.0], np.cumsum(step)])
+    d = np.stack([np.full(T, 1.5 * LANE_W), d_target, np.full(T, 0.5 * LANE_W), np.full(T, 2.5 * LANE_W),
+                  np.zeros(T)], -1)
+    zeros = np.zeros((T, 5))
+    return Scene(
+        s_m=s, d_m=d, x_m=s, y_m=d, heading_rad=zeros, road_angle_rad=zeros,
+        speed_mps=zeros + 25.0, lane=(d // LANE_W).astype(np.int32),
+        length_m=np.array([4.6, 4.60049, 12.0, 5.5, 4.6]), width_m=np.array([1.8, 1.8, 2.5, 2.0, 1.8]),
+        kind=np.array([CAR, CAR, TRUCK, VAN, CAR]), role=np.array([EGO, TARGET, BACKGROUND, BACKGROUND, BACKGROUND]),
+        present=np.array([True, True, True, True, False]),
+    )
+
+
+def test_road_json_keeps_the_real_pieces_with_an_arcs_end_from_its_radius():
+    data = road_json(load_road("us101"), "us101")
+    assert (data["name"], data["length_m"], data["lane_width_m"], data["num_lanes"], data["auxiliary_lanes"]) == (
+        "us101", 640.0, 3.66, 6, 1)
+    segments = data["segments"]
+    assert [seg["start_s_m"] for seg in segments] == [0.0, 120.0, 280.0, 360.0, 520.0]  # no padding at 640 m
+    turn = 160.0 / 1200.0  # the left bend: 160 m of R = 1200 m
+    want = {"start_s_m": 280.0, "curvature_1pm": 0.0, "x_m": 120.0 + 1200.0 * np.sin(turn),
+            "y_m": 1200.0 * (1.0 - np.cos(turn)), "heading_rad": turn}
+    assert segments[2] == pytest.approx(want, rel=1e-9, abs=1e-12)
+    assert segments[1]["curvature_1pm"] == pytest.approx(1.0 / 1200.0, rel=1e-12)
+    assert segments[3]["curvature_1pm"] == pytest.approx(-1.0 / 1500.0, rel=1e-12)
+    # One piece, padded to the road's end: the first piece is kept whatever its start.
+    assert road_json(load_road("straight"), "straight")["segments"] == [
+        {"start_s_m": 0.0, "curvature_1pm": 0.0, "x_m": 0.0, "y_m": 0.0, "heading_rad": 0.0}]
+
+
+def test_scene_json_lists_present_vehicles_in_millimetres():
+    scene = _scene()
+    data = scene_json(scene, load_road("straight"), "straight")
+    assert (data["dt_s"], data["num_frames"], data["road"]["name"]) == (0.1, T, "straight")
+    vehicles = data["vehicles"]
+    assert [(v["role"], v["kind"]) for v in vehicles] == [
+        ("ego", "car"), ("target", "car"), ("background", "truck"), ("background", "van")]
+    assert [(v["length_m"], v["width_m"]) for v in vehicles] == [(4.6, 1.8), (4.6, 1.8), (12.0, 2.5), (5.5, 2.0)]
+    assert vehicles[3]["s_m"][:2] == [12.346, 14.346]  # 12.345649 and 14.345649 m to the millimetre
+    assert vehicles[1]["d_m"][-1] == round(float(scene.d_m[-1, 1]), 3)
+    for v in vehicles:
+        assert len(v["s_m"]) == len(v["d_m"]) == len(v["x_m"]) == len(v["y_m"]) == T
+
+
+def test_an_outline_is_the_body_turned_by_its_heading():
+    corners = _outline(10.0, 5.0, np.pi / 2, 4.0, 2.0)  # facing +y: front at y = 7, left side at x = 9
+    np.testing.assert_allclose(corners, [[9.0, 7.0], [11.0, 7.0], [11.0, 3.0], [9.0, 3.0]], atol=1e-12)
+    np.testing.assert_allclose(_outline(0.0, 0.0, 0.0, 4.0, 2.0), [[2, 1], [2, -1], [-2, -1], [-2, 1]], atol=1e-15)
+
+
+def test_the_lane_change_frame_is_the_fastest_sideways_step():
+    assert _lane_change_frame(_scene()) == PEAK
+    assert _lane_change_frame(_scene(lane_change=False)) == T // 2  # no lane change: the middle
+
+
+def test_the_figure_zooms_on_the_lane_change_and_names_each_role_once():
+    scene = _scene()
+    fig = scene_figure(scene, load_road("straight"), "hand scene")
+    top, bottom = fig.axes
+    # +-3 s around frame 60: frames 30..90.
+    assert top.get_title().startswith("hand scene\nbird's-eye view, t = 3.0 .. 9.0 s around the lane change")
+    assert bottom.get_legend_handles_labels()[1] == ["ego", "target", "background"]
+    # Outlines every 1 s in the zoom (frames 30, 40, .., 90) and every 2 s over the scene (0, 20, .., 100),
+    # for the four present vehicles; darker later.
+    assert (len(top.patches), len(bottom.patches)) == (4 * 7, 4 * 6)
+    assert [round(p.get_alpha(), 6) for p in top.patches[:7]] == [round(0.2 + 0.1 * n, 6) for n in range(7)]
+    np.testing.assert_allclose(bottom.patches[0].get_xy()[:4], _outline(20.0, 1.5 * LANE_W, 0.0, 4.6, 1.8))
+    ego, target = top.lines[4:6]  # after the road's 4 lines, in the vehicles' order
+    assert target.get_linewidth() == 1.5 and mcolors.to_hex(target.get_color()) == mcolors.to_hex(ROLE_COLOURS[TARGET])
+    assert ego.get_linewidth() == 3.0 and mcolors.to_hex(ego.get_color()) == mcolors.to_hex(ROLE_COLOURS[EGO])
+    np.testing.assert_allclose(ego.get_xdata(), scene.x_m[30:91, 0])
+    # The road drawn 15 m beyond the zoom's vehicles (top), and over the scene (bottom) from 10 m
+    # behind its rearmost vehicle (5 m) or 0 m to the road's end or 10 m past its foremost;
+    # 3 lanes: 4 lines each.
+    s_zoom = scene.s_m[30:91, :4]
+    np.testing.assert_allclose(top.lines[0].get_xdata()[[0, -1]], [s_zoom.min() - 15.0, s_zoom.max() + 15.0])
+    assert list(bottom.lines[0].get_xdata()[[0, -1]]) == [-5.0, 1000.0]
+    assert (top.lines[0].get_linewidth(), top.lines[1].get_linewidth()) == (1.2, 0.6)
+
+
+def test_the_road_frame_panel_reaches_past_vehicles_beyond_the_road():
+    import dataclasses
+
+    scene = _scene()
+    far = dataclasses.replace(scene, s_m=scene.s_m + 900.0, x_m=scene.x_m + 900.0)  # foremost at 1195 m
+    bottom = scene_figure(far, load_road("straight")).axes[1]
+    assert list(bottom.lines[0].get_xdata()[[0, -1]]) == [0.0, 1205.0]
+    assert bottom.get_xlabel() == "s along the road [m]" and bottom.get_ylabel() == "d to the left [m]"
