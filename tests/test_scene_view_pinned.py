@@ -24,23 +24,28 @@ T, LANE_W = 101, 3.66
 PEAK = 60  # the frame after which the target moves sideways fastest
 
 
-def _scene(lane_change: bool = True) -> Scene:
-    """Ego, target, two background cars and one absent slot on the straight road, 10 s at 10 Hz."""
-    t = np.arange(T) * 0.1
-    s = np.stack([20.0 + 25.0 * t, 35.0 + 26.0 * t, 5.0 + 24.0 * t, 12.345649 + 20.0 * t, np.zeros(T)], -1)
-    step = np.zeros(T - 1)
-    if lane_change:  # a lateral move over frames 45..75, fastest between frames 60 and 61
-        step[45:76] = LANE_W * (1.0 - np.abs(np.arange(45, 76) - PEAK) / 16.0) / 16.0
+def _scene(lane_change: bool = True, frames: int = T, peak: int = PEAK, s0_m: float = 0.0, speed: float = 1.0,
+           dtype=np.float64) -> Scene:
+    """Ego, target, two background cars and one absent slot (the fourth of five) on the straight
+    road, 10 s at 10 Hz; the target's lateral move is fastest between frames `peak` and `peak + 1`."""
+    t = np.arange(frames) * 0.1
+    s = s0_m + speed * np.stack([20.0 + 25.0 * t, 35.0 + 26.0 * t, 5.0 + 24.0 * t, np.zeros(frames),
+                                 12.345649 / speed + 20.0 * t], -1)
+    step = np.zeros(frames - 1)
+    if lane_change:  # a lateral move over peak - 15 .. peak + 15
+        ks = np.arange(max(peak - 15, 0), min(peak + 16, frames - 1))
+        step[ks] = LANE_W * (1.0 - np.abs(ks - peak) / 16.0) / 16.0
     d_target = 1.5 * LANE_W + np.concatenate([[0.0], np.cumsum(step)])
-    d = np.stack([np.full(T, 1.5 * LANE_W), d_target, np.full(T, 0.5 * LANE_W), np.full(T, 2.5 * LANE_W),
-                  np.zeros(T)], -1)
-    zeros = np.zeros((T, 5))
+    d = np.stack([np.full(frames, 1.5 * LANE_W), d_target, np.full(frames, 0.5 * LANE_W), np.zeros(frames),
+                  np.full(frames, 2.5 * LANE_W)], -1)
+    zeros = np.zeros((frames, 5))
+    f = lambda a: np.asarray(a, dtype)
     return Scene(
-        s_m=s, d_m=d, x_m=s, y_m=d, heading_rad=zeros, road_angle_rad=zeros,
-        speed_mps=zeros + 25.0, lane=(d // LANE_W).astype(np.int32),
-        length_m=np.array([4.6, 4.60049, 12.0, 5.5, 4.6]), width_m=np.array([1.8, 1.8, 2.5, 2.0, 1.8]),
-        kind=np.array([CAR, CAR, TRUCK, VAN, CAR]), role=np.array([EGO, TARGET, BACKGROUND, BACKGROUND, BACKGROUND]),
-        present=np.array([True, True, True, True, False]),
+        s_m=f(s), d_m=f(d), x_m=f(s), y_m=f(d), heading_rad=f(zeros), road_angle_rad=f(zeros),
+        speed_mps=f(zeros + 25.0), lane=(d // LANE_W).astype(np.int32),
+        length_m=f([4.6, 4.60049, 12.0, 4.6, 5.5]), width_m=f([1.8, 1.80049, 2.5, 1.8, 2.0]),
+        kind=np.array([CAR, CAR, TRUCK, CAR, VAN]), role=np.array([EGO, TARGET, BACKGROUND, BACKGROUND, BACKGROUND]),
+        present=np.array([True, True, True, False, True]),
     )
 
 
@@ -71,14 +76,19 @@ def test_scene_json_lists_present_vehicles_in_millimetres():
     assert [(v["length_m"], v["width_m"]) for v in vehicles] == [(4.6, 1.8), (4.6, 1.8), (12.0, 2.5), (5.5, 2.0)]
     assert vehicles[3]["s_m"][:2] == [12.346, 14.346]  # 12.345649 and 14.345649 m to the millimetre
     assert vehicles[1]["d_m"][-1] == round(float(scene.d_m[-1, 1]), 3)
+    assert vehicles[1]["width_m"] == 1.8  # 1.80049 m
     for v in vehicles:
         assert len(v["s_m"]) == len(v["d_m"]) == len(v["x_m"]) == len(v["y_m"]) == T
+    # A float32 scene (what the simulation gives) is written as the same decimal millimetres.
+    assert scene_json(_scene(dtype=np.float32), load_road("straight"), "straight") == data
 
 
 def test_an_outline_is_the_body_turned_by_its_heading():
     corners = _outline(10.0, 5.0, np.pi / 2, 4.0, 2.0)  # facing +y: front at y = 7, left side at x = 9
     np.testing.assert_allclose(corners, [[9.0, 7.0], [11.0, 7.0], [11.0, 3.0], [9.0, 3.0]], atol=1e-12)
     np.testing.assert_allclose(_outline(0.0, 0.0, 0.0, 4.0, 2.0), [[2, 1], [2, -1], [-2, -1], [-2, 1]], atol=1e-15)
+    c, s = np.cos(0.5), np.sin(0.5)  # a 5 m x 3 m body at 0.5 rad: the front-left corner (2.5, 1.5) turned
+    np.testing.assert_allclose(_outline(1.0, 2.0, 0.5, 5.0, 3.0)[0], [1.0 + 2.5 * c - 1.5 * s, 2.0 + 2.5 * s + 1.5 * c])
 
 
 def test_the_lane_change_frame_is_the_fastest_sideways_step():
@@ -105,7 +115,7 @@ def test_the_figure_zooms_on_the_lane_change_and_names_each_role_once():
     # The road drawn 15 m beyond the zoom's vehicles (top), and over the scene (bottom) from 10 m
     # behind its rearmost vehicle (5 m) or 0 m to the road's end or 10 m past its foremost;
     # 3 lanes: 4 lines each.
-    s_zoom = scene.s_m[30:91, :4]
+    s_zoom = scene.s_m[30:91][:, [0, 1, 2, 4]]  # the present vehicles
     np.testing.assert_allclose(top.lines[0].get_xdata()[[0, -1]], [s_zoom.min() - 15.0, s_zoom.max() + 15.0])
     assert list(bottom.lines[0].get_xdata()[[0, -1]]) == [-5.0, 1000.0]
     assert (top.lines[0].get_linewidth(), top.lines[1].get_linewidth()) == (1.2, 0.6)
@@ -119,3 +129,37 @@ def test_the_road_frame_panel_reaches_past_vehicles_beyond_the_road():
     bottom = scene_figure(far, load_road("straight")).axes[1]
     assert list(bottom.lines[0].get_xdata()[[0, -1]]) == [0.0, 1205.0]
     assert bottom.get_xlabel() == "s along the road [m]" and bottom.get_ylabel() == "d to the left [m]"
+
+
+def test_the_figure_draws_roads_tracks_and_outlines_in_their_frames():
+    """On the US-101's left bend (R = 1200 m from s = 120 m to 280 m, centre at x = 120 m,
+    y = 1200 m): the top panel's lane lines are arcs of radius 1200 m - k x 3.66 m, the bottom
+    panel's the straight lines d = k x 3.66 m; each track and outline in its panel's frame."""
+    scene = _scene(frames=41, peak=20, s0_m=140.0, speed=0.5)
+    fig = scene_figure(scene, load_road("us101"))
+    top, bottom = fig.axes
+    assert top.get_title().startswith("scene\nbird's-eye view, t = 0.0 .. 4.0 s")  # zoom from frame 0
+    assert (top.get_xlabel(), top.get_ylabel()) == ("x [m]", "y [m]")
+    assert bottom.get_title() == "whole scene in the road frame (lateral stretched; outlines every 2 s)"
+    for k in range(7):
+        x, y = top.lines[k].get_xdata(), top.lines[k].get_ydata()
+        np.testing.assert_allclose(np.hypot(x - 120.0, y - 1200.0), 1200.0 - k * LANE_W, rtol=1e-9)
+        np.testing.assert_allclose(bottom.lines[k].get_ydata(), k * LANE_W, rtol=1e-12)
+        edge = k in (0, 6)
+        assert (top.lines[k].get_linestyle(), top.lines[k].get_linewidth()) == (("-", 1.2) if edge else ("--", 0.6))
+        assert mcolors.to_hex(top.lines[k].get_color()) == mcolors.to_hex(bottom.lines[k].get_color()) == "#000000"
+    tracks = bottom.lines[7:]
+    for line, v in zip(tracks, (0, 1, 2, 4), strict=True):
+        np.testing.assert_allclose(line.get_xdata(), scene.s_m[:, v])
+        np.testing.assert_allclose(line.get_ydata(), scene.d_m[:, v])
+    role_of = [0, 1, 5, 5]
+    for panel, per_vehicle in ((top, 5), (bottom, 3)):  # frames 0, 10, .., 40 and 0, 20, 40
+        for n, patch in enumerate(panel.patches):
+            assert patch.get_linewidth() == 0.0
+            want = mcolors.to_rgb(ROLE_COLOURS[role_of[n // per_vehicle]])
+            assert mcolors.to_rgb(patch.get_facecolor()) == pytest.approx(want)
+
+
+def test_two_outlines_go_from_faint_to_dark():
+    bottom = scene_figure(_scene(frames=21, peak=10), load_road("straight")).axes[1]
+    assert [round(p.get_alpha(), 9) for p in bottom.patches[:2]] == [0.2, 0.8]  # frames 0 and 20
