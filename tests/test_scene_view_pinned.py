@@ -26,8 +26,9 @@ PEAK = 60  # the frame after which the target moves sideways fastest
 
 def _scene(lane_change: bool = True, frames: int = T, peak: int = PEAK, s0_m: float = 0.0, speed: float = 1.0,
            dtype=np.float64) -> Scene:
-    """Ego, target, two background cars and one absent slot (the fourth of five) on the straight
-    road, 10 s at 10 Hz; the target's lateral move is fastest between frames `peak` and `peak + 1`."""
+    """Ego, target, two background vehicles and one absent slot (the fourth of five): `frames` at
+    10 Hz (10 s by default), positions from `s0_m` at `speed` times the base speeds; the target's
+    lateral move is fastest between frames `peak` and `peak + 1`."""
     t = np.arange(frames) * 0.1
     s = s0_m + speed * np.stack([20.0 + 25.0 * t, 35.0 + 26.0 * t, 5.0 + 24.0 * t, np.zeros(frames),
                                  12.345649 / speed + 20.0 * t], -1)
