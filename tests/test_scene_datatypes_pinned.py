@@ -1,0 +1,95 @@
+"""The scene's datatypes pinned to the facts other stages read from them: the kind and role
+numbering (the radar's cross-section table, the viewer's and report's names, the scenarios' ego
+and target rows), the frame period, and which fields are arrays and which are static."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffsense import sensors
+from diffsense.scene import (
+    ADJACENT,
+    BACKGROUND,
+    CAR,
+    EGO,
+    EGO_INDEX,
+    KIND_NAMES,
+    LEAD,
+    ROLE_NAMES,
+    TARGET,
+    TARGET_INDEX,
+    TARGET_LEAD,
+    TRUCK,
+    VAN,
+    Scene,
+    load_scenario,
+    simulate_scenario,
+)
+
+ARRAY_FIELDS = ("s_m", "d_m", "x_m", "y_m", "heading_rad", "road_angle_rad", "speed_mps", "lane",
+                "length_m", "width_m", "kind", "role", "present")
+
+
+def _scene(lead: tuple[int, ...], frames: int, vehicles: int, **kw) -> Scene:
+    """A scene of distinct constant fields (field i holds i), with leading batch axes `lead`."""
+    per_frame = lead + (frames, vehicles)
+    per_vehicle = lead + (vehicles,)
+    fields = {}
+    for i, name in enumerate(ARRAY_FIELDS):
+        shape = per_frame if i < 8 else per_vehicle
+        dtype = jnp.int32 if name in ("lane", "kind", "role") else jnp.bool_ if name == "present" else jnp.float64
+        fields[name] = jnp.full(shape, i, dtype)
+    return Scene(**fields, **kw)
+
+
+def test_kinds_are_numbered_in_the_order_of_their_names_and_of_the_radars_cross_sections():
+    assert (CAR, VAN, TRUCK) == (0, 1, 2)
+    assert KIND_NAMES == ("car", "van", "truck")
+    radar = sensors.load_config("radar")
+    rcs = sensors.radar_rcs_dbsm(jnp.asarray([TRUCK, CAR, VAN]), radar)
+    np.testing.assert_array_equal(rcs, [radar.rcs_truck_dbsm, radar.rcs_car_dbsm, radar.rcs_van_dbsm])
+    assert radar.rcs_car_dbsm < radar.rcs_van_dbsm < radar.rcs_truck_dbsm  # the table is not one value
+
+
+def test_roles_are_numbered_in_the_order_of_their_names_with_ego_and_target_first():
+    assert (EGO, TARGET, LEAD, TARGET_LEAD, ADJACENT, BACKGROUND) == (0, 1, 2, 3, 4, 5)
+    assert ROLE_NAMES == ("ego", "target", "lead", "target_lead", "adjacent", "background")
+    assert (EGO_INDEX, TARGET_INDEX) == (0, 1)
+    assert (Scene.ego_index, Scene.target_index) == (0, 1)
+
+
+def test_a_simulated_scenario_has_its_ego_in_row_0_and_its_target_in_row_1():
+    cfg = load_scenario("sc01")
+    scene = simulate_scenario(cfg, 2, 0)
+    role = np.asarray(scene.role)
+    assert role.shape == (2, scene.num_vehicles)
+    np.testing.assert_array_equal(role[:, EGO_INDEX], EGO)
+    np.testing.assert_array_equal(role[:, TARGET_INDEX], TARGET)
+    assert (role[:, 2:] > TARGET).all()  # no other row is an ego or a target
+    assert KIND_NAMES[int(scene.kind[0, EGO_INDEX])] == cfg.ego.kind
+
+
+def test_the_frame_period_is_a_static_tenth_of_a_second_and_every_other_field_a_leaf():
+    scene = _scene((), 5, 3)
+    assert scene.dt_s == 0.1
+    leaves = jax.tree.leaves(scene)
+    assert len(leaves) == len(ARRAY_FIELDS)
+    assert all(leaf is getattr(scene, name) for leaf, name in zip(leaves, ARRAY_FIELDS))  # in field order
+    # Static: two periods are two tree structures, so a jitted function sees the period as a
+    # Python number and retraces for another one.
+    assert jax.tree.structure(scene) != jax.tree.structure(_scene((), 5, 3, dt_s=0.04))
+    seen = []
+    jax.jit(lambda s: seen.append(type(s.dt_s)) or s.s_m)(_scene((), 5, 3, dt_s=0.04))
+    assert seen == [float]
+
+
+def test_frames_and_vehicles_are_counted_on_the_trailing_axes_with_or_without_a_batch():
+    for lead in ((), (4,), (2, 4)):
+        scene = _scene(lead, 7, 3)
+        assert (scene.num_frames, scene.num_vehicles) == (7, 3)
+    # vmapped over variants, each variant's scene counts the same
+    counts = []
+    jax.vmap(lambda s: counts.append((s.num_frames, s.num_vehicles)) or s.s_m)(_scene((4,), 7, 3))
+    assert counts == [(7, 3)]
