@@ -1,6 +1,6 @@
 """The CS-LSTM module's constructors and entry points beyond the numpy parity of
 `test_predict.py`: the variant each constructor builds, the dense call against the compact one,
-float32 kept through both, histories with any leading axes, the compact input's padding and
+float32 kept through both, the mean trajectory of each mode, histories with any leading axes, the compact input's padding and
 shared slots, and the refused mean mode."""
 
 from __future__ import annotations
@@ -26,10 +26,10 @@ def _shapes(model: CSLSTM) -> dict:
     return jax.tree.map(lambda a: tuple(a.shape), nnx.to_pure_dict(nnx.state(model, nnx.Param)))
 
 
-def _wide_model(maneuvers: bool, seed: int = 0) -> CSLSTM:
+def _wide_model(maneuvers: bool, seed: int = 0, dtype=np.float64) -> CSLSTM:
     """Parameters uniform in [-0.5, 0.5], wider than the initialisation, so every layer shows."""
     rng = np.random.default_rng(seed)
-    params = jax.tree.map(lambda shape: rng.uniform(-0.5, 0.5, size=shape), param_shapes(maneuvers),
+    params = jax.tree.map(lambda shape: rng.uniform(-0.5, 0.5, size=shape).astype(dtype), param_shapes(maneuvers),
                           is_leaf=lambda x: isinstance(x, tuple))
     return model_from_params(maneuvers, params)
 
@@ -91,8 +91,7 @@ def test_the_dense_call_is_the_compact_call_with_each_neighbour_in_its_slot(mane
 
 @pytest.mark.parametrize("maneuvers", [False, True])
 def test_a_float32_network_answers_in_float32_through_both_entry_points(maneuvers):
-    params = jax.tree.map(lambda a: np.asarray(a, np.float32), nnx.to_pure_dict(nnx.state(_wide_model(maneuvers))))
-    model = model_from_params(maneuvers, params)
+    model = _wide_model(maneuvers, dtype=np.float32)
     hist, nbr_hist, slot, weight = (a.astype(jnp.float32) if a.dtype != jnp.int32 else a for a in _batch(4))
     rows = jnp.arange(B)[:, None]
     nbrs = jnp.zeros((B, N_SLOTS, 16, 2), jnp.float32).at[rows, slot].set(nbr_hist)
@@ -127,6 +126,28 @@ def test_compact_input_ignores_slots_outside_the_grid_and_adds_neighbours_sharin
     split_slot = jnp.concatenate([slot[:, :1], slot], axis=1)
     split_weight = jnp.concatenate([0.3 * weight[:, :1], weight.at[:, 0].multiply(0.7)], axis=1)
     _assert_same_prediction(model.compact(hist, split_hist, split_slot, split_weight), want)
+
+
+@pytest.mark.parametrize("dtype, tol", [(np.float64, 1e-12), (np.float32, 1e-5)])
+def test_the_mean_trajectory_is_the_most_probable_mode_or_the_probability_weighted_one(dtype, tol):
+    model = _wide_model(True, seed=6, dtype=dtype)
+    enc = jnp.asarray(np.random.default_rng(7).normal(size=(64, 112)) * 2.0, dtype)
+    pred = model.heads(enc)
+    lat, lon = np.asarray(pred.lat_prob, np.float64), np.asarray(pred.lon_prob, np.float64)
+    # mode = lon * 3 + lat, its probability the product of the two
+    np.testing.assert_allclose(pred.mode_prob, (lon[:, :, None] * lat[:, None, :]).reshape(64, 6), rtol=tol)
+    fut = np.asarray(pred.fut[..., :2], np.float64)
+    picked = fut[np.arange(64), lon.argmax(-1) * 3 + lat.argmax(-1)]
+    weighted = np.einsum("bk,bktc->btc", np.asarray(pred.mode_prob, np.float64), fut)
+    for mean, want in ((model.mean_from_context(enc), picked),
+                       (model.mean_from_context(enc, mode="most_probable"), picked),
+                       (model.mean_from_context(enc, mode="weighted"), weighted)):
+        assert mean.shape == (64, 25, 2) and mean.dtype == dtype
+        np.testing.assert_allclose(mean, want, rtol=tol, atol=tol)
+    single = _wide_model(False, seed=6, dtype=dtype)
+    mean = single.mean_from_context(enc)
+    assert mean.shape == (64, 25, 2) and mean.dtype == dtype
+    np.testing.assert_allclose(mean, single.heads(enc).fut[:, 0, :, :2], rtol=tol, atol=tol)
 
 
 def test_an_unknown_mean_mode_is_refused_by_name():
