@@ -1,7 +1,7 @@
 """The CS-LSTM module's constructors and entry points beyond the numpy parity of
 `test_predict.py`: the variant each constructor builds, the dense call against the compact one,
-float32 kept through both, the mean trajectory of each mode, histories with any leading axes, the compact input's padding and
-shared slots, and the refused mean mode."""
+float32 kept through both, the mean trajectory of each mode, histories with any leading axes,
+the compact input's padding and shared slots, and the refused mean mode."""
 
 from __future__ import annotations
 
