@@ -33,14 +33,12 @@ ARRAY_FIELDS = ("s_m", "d_m", "x_m", "y_m", "heading_rad", "road_angle_rad", "sp
 
 
 def _scene(lead: tuple[int, ...], frames: int, vehicles: int, **kw) -> Scene:
-    """A scene of distinct constant fields (field i holds i), with leading batch axes `lead`."""
-    per_frame = lead + (frames, vehicles)
-    per_vehicle = lead + (vehicles,)
+    """A scene of zeros (each field its own array), with leading batch axes `lead`."""
     fields = {}
     for i, name in enumerate(ARRAY_FIELDS):
-        shape = per_frame if i < 8 else per_vehicle
+        shape = lead + ((frames, vehicles) if i < 8 else (vehicles,))  # the first 8 are per frame
         dtype = jnp.int32 if name in ("lane", "kind", "role") else jnp.bool_ if name == "present" else jnp.float64
-        fields[name] = jnp.full(shape, i, dtype)
+        fields[name] = jnp.zeros(shape, dtype)
     return Scene(**fields, **kw)
 
 
