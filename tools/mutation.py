@@ -42,7 +42,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("sensors", "tracks", "metrics", "solve", "predictors", "scene")
+# "core" is the package's top level: the modules directly under diffsense/ (name them with --files).
+PACKAGES = ("sensors", "tracks", "metrics", "solve", "predictors", "scene", "core")
 
 
 # A mutant name pattern that matches no mutant: `mutmut run` with it generates the mutants and
@@ -85,12 +86,18 @@ def _export(rev: str, workdir: Path) -> str:
     return commit
 
 
+def _folder(package: str) -> str:
+    """The package's folder: diffsense/ itself for "core"."""
+    return "diffsense" if package == "core" else f"diffsense/{package}"
+
+
 def _configure(workdir: Path, package: str, files: list[str]) -> list[str]:
     """Write the scratch setup.cfg's [mutmut] section for `package`; returns the test files."""
     parser = configparser.ConfigParser()
     parser.read(workdir / "setup.cfg")
     section = parser[f"mutmut:{package}"]
-    patterns = [f"diffsense/{package}/{f}" for f in files] if files else [f"diffsense/{package}/*"]
+    folder = _folder(package)
+    patterns = [f"{folder}/{f}" for f in files] if files else [f"{folder}/*"]
     tests = section["tests"].split()
     parser["mutmut"]["only_mutate"] = "\n" + "\n".join(patterns)
     parser["mutmut"]["pytest_add_cli_args_test_selection"] = "\n" + "\n".join(tests)
@@ -145,7 +152,7 @@ def _report(workdir: Path, package: str, commit: str, tests: list[str], command:
         module = name.split(".x_")[0].split(".xǁ")[0]
         by_file[module][status] += 1
     total = collections.Counter(results.values())
-    lines = [f"# Mutation run: diffsense/{package} at {commit[:12]}", "",
+    lines = [f"# Mutation run: {_folder(package)} at {commit[:12]}", "",
              f"Command: `{command}` ({wall_s / 60:.1f} min)", "",
              f"Tests: {' '.join(tests)}", ""]
     if sample is not None:
@@ -185,6 +192,8 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.report_only and args.workdir is None:
         parser.error("--report-only needs the --workdir of the run")
+    if args.package == "core" and not args.files and not args.report_only:
+        parser.error("core (the modules directly under diffsense/) needs --files")
     if args.sample is not None and (args.mutants or args.sample < 1):
         parser.error("--sample takes N >= 1, and no --mutants")
     return args
@@ -224,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix=f"mutation-{args.package}-")) / "tree"
     commit = _export(args.rev, workdir)
     tests = _configure(workdir, args.package, args.files)
-    print(f"mutating diffsense/{args.package} of {commit[:12]} in {workdir}", flush=True)
+    print(f"mutating {_folder(args.package)} of {commit[:12]} in {workdir}", flush=True)
     start = time.perf_counter()
     names, sample = list(args.mutants), None
     if args.sample is not None:
