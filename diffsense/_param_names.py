@@ -58,6 +58,8 @@ def _resolve_params(sensor: Sensor, params: Mapping[str, Any]) -> dict[str, tupl
             raise InputError(f"parameter {name} is named twice")
         try:
             lo, hi = (_finite(b, f"bounds of {name}") for b in bounds)
+        except InputError:  # a bound that is no number, or not finite: its own message
+            raise
         except (TypeError, ValueError):
             raise InputError(f"bounds of {name} must be two numbers (lo, hi), got {bounds!r}") from None
         if not lo < hi:
