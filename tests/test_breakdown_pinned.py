@@ -110,10 +110,34 @@ def test_tracked_summary_is_j_of_the_tracked_question():
     assert n["E_tracked"] is None and n["missed_share"] == 1.0 and n["J_m2"] == 7.0
 
 
+def test_one_tracked_instant_of_unit_weight_has_its_e():
+    one = SimpleNamespace(sq_instant=np.array([[9.0, 4.0]]), coverage=np.array([[[1, 1, 1], [0, 0, 0]]], float))
+    s = tracked_summary(one, np.array([1.0]), 0.0)
+    assert s["E_tracked"] == 3.0 and s["missed_share"] == 0.5 and s["J_m2"] == 4.5
+
+
+def test_float32_inputs_are_summed_in_float64():
+    # 2^24 + 1 is 2^24 in float32: summed there, the two unit weights (or errors) would vanish.
+    big = float(2**24)
+    weight = np.array([big, 1.0, 1.0], np.float32)
+    sq_error = np.array([[big], [1.0], [1.0]], np.float32)
+    sq_true = np.array([[[big]], [[1.0]], [[1.0]]], np.float32)
+    hard = SimpleNamespace(sq_instant=np.ones((3, 1), np.float32), coverage=np.ones((3, 1, 3), np.float32),
+                           sq_error=sq_error, sq_true_gt=sq_true, sq_true_sensor=sq_true)
+    b = breakdown(hard, np.array([0, 0, 0]), weight, ("a",), (0.2,))
+    exact = math.sqrt((big * big + 2.0) / (big + 2.0))
+    for key in ("E_hard", "rmse_true_gt", "rmse_true_sensor"):
+        assert b["by_horizon"][key][0] == pytest.approx(exact, rel=1e-15), key
+    untracked = SimpleNamespace(sq_instant=hard.sq_instant, coverage=np.zeros((3, 1, 3), np.float32))
+    hard.coverage[0, 0, 1] = 0.0  # the heavy variant untracked: 2 of 2^24 + 2 tracked
+    assert tracked_summary(hard, weight, 0.0)["missed_share"] == 1.0 - 2.0 / (big + 2.0)  # not 1 - 2 / 2^24
+    assert tracked_summary(untracked, weight, 0.0)["missed_share"] == 1.0
+
+
 def _objective(gt_minus_true, rate_hz=2.0, future_points=5, weight=(1.0, 1.0, 2.0), scenario=(0, 0, 1)):
     """A stand-in for an objective: the domain guard reads its data, spec and scenario names."""
     n, i = len(weight), 2
-    true = np.zeros((n, i, future_points, 2))
+    true = np.broadcast_to(np.array([100.0, -3.0]), (n, i, future_points, 2))  # the true future [m]
     gt = true + np.asarray(gt_minus_true, float)
     data = SimpleNamespace(gt_pred=gt, true_fut=true, weight=np.asarray(weight), scenario=np.asarray(scenario))
     return SimpleNamespace(data=data, spec=SimpleNamespace(rate_hz=rate_hz, future_points=future_points),
@@ -145,14 +169,27 @@ def test_domain_weighs_variants_and_averages_instants():
     assert check["scenarios"]["fast"]["rmse_gt_m"] == [0.0]
 
 
+def test_domain_sums_float32_in_float64():
+    big = float(2**24)  # 2^24 + 1 is 2^24 in float32
+    err = np.zeros((3, 2, 2, 2))
+    err[0, :, 1, 0], err[1:, :, 1, 0] = 2.0, 1.0  # the heavy variant 2 m off, the others 1 m
+    obj = _objective(err, future_points=2, weight=(big, 1.0, 1.0))  # "slow": variants 0 and 1
+    obj.data.gt_pred, obj.data.true_fut = obj.data.gt_pred.astype(np.float32), obj.data.true_fut.astype(np.float32)
+    obj.data.weight = obj.data.weight.astype(np.float32)
+    rmse = domain_check(obj, None)["scenarios"]["slow"]["rmse_gt_m"]
+    assert rmse == pytest.approx([math.sqrt((4 * big + 1) / (big + 1))], rel=1e-15)
+
+
 def test_the_guard_draws_its_line_at_twice_the_validation_rmse():
-    err = np.broadcast_to(np.array([3.0, 4.0]), (3, 2, 5, 2))  # 5 m at every step
-    inside = domain_check(_objective(err), (2.5, 2.5))  # exactly 2 x 2.5: inside
+    # 1, 3 and 5 m at the whole seconds (steps 1, 3, 5 of 6 at 2 Hz), against 0.5, 1.5, 2.5 m.
+    err = np.broadcast_to(np.arange(6.0)[None, None, :, None] * np.array([1.0, 0.0]), (3, 2, 6, 2))
+    inside = domain_check(_objective(err, future_points=6), (0.5, 1.5, 2.5))  # exactly 2x: inside
+    assert inside["scenarios"]["fast"]["rmse_gt_m"] == pytest.approx([1.0, 3.0, 5.0])
     assert inside["outside"] == [] and inside["scenarios"]["fast"]["inside"] is True
     assert domain_note(inside) is None
-    below = domain_check(_objective(err), (2.5, math.nextafter(2.5, 0.0)))  # 2 s just past the line
+    below = domain_check(_objective(err, future_points=6), (0.5, math.nextafter(1.5, 0.0), 2.5))
     assert below["outside"] == ["slow", "fast"] and below["scenarios"]["slow"]["inside"] is False
     assert domain_note(below) == (
-        "outside the predictor's domain: slow (5.0 m at 2 s), fast (5.0 m at 2 s): even from "
+        "outside the predictor's domain: slow (5.0 m at 3 s), fast (5.0 m at 3 s): even from "
         "ground-truth histories its prediction is more than 2x its validation RMSE off the true "
         "future, so E there says little about the sensor")

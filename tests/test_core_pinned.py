@@ -52,9 +52,9 @@ def test_intervals_open_and_close_with_the_runs():
 
 @pytest.mark.parametrize("side", ["lo", "hi"])
 def test_pressing_on_bound_at_exactly_two_percent_of_the_width(side):
-    lo, hi = 10.0, 60.0  # width 50: 2 % is 1.0, exact in binary
+    lo, hi = 10.0, 60.0  # width 50: 2 % is 1.0, exact in binary (of hi + lo, it would be 1.4)
     at = lo + 1.0 if side == "lo" else hi - 1.0
-    past = lo + 1.5 if side == "lo" else hi - 1.5
+    past = lo + 1.2 if side == "lo" else hi - 1.2
     pts = [(lo, 5.0), (20.0, 6.0), (35.0, 7.0), (hi, 8.0)]
     assert "pressing_on_bound" in near_optimal(pts, lo, hi, at)["flags"]
     assert "pressing_on_bound" not in near_optimal(pts, lo, hi, past)["flags"]
@@ -104,17 +104,22 @@ def test_suite_names_resolve_within_their_member():
     assert resolve_name(SUITE, "radar.hfov_deg") == "radar.hfov_deg"
     assert resolve_name(SUITE, "radar.hfov") == "radar.hfov_deg"
     assert resolve_name(SUITE, "camera.width") == "camera.width_px"
+    # The first dot names the member, which resolves the rest: "radar.camera.hfov" asks the radar
+    # for camera.hfov (refused below), "radar.radar.hfov" the radar for radar.hfov.
+    assert resolve_name(SUITE, "radar.radar.hfov") == "radar.hfov_deg"
 
 
 @pytest.mark.parametrize("sensor, name, message", [
     (RADAR, "fov", ("unknown radar parameter 'fov' (known: hfov (hfov_deg), vfov (vfov_deg), range (range_m), "
                     "tx_power (tx_power_dbm), noise_figure (noise_figure_db), yaw (yaw_deg), "
                     "mount_x (mount_x_m), mount_y (mount_y_m))")),
+    (RADAR, "radar.hfov.deg", "unknown radar parameter 'hfov.deg' (known: "),
     (RADAR, "camera.hfov_deg", "parameter camera.hfov_deg names sensor 'camera', not in this problem (radar)"),
     (CAMERA, "camera.snr", "unknown camera parameter 'snr' (known: "),
     (SUITE, "hfov", "a suite's parameters are qualified by the sensor: give e.g. radar.hfov, camera.hfov"),
     (SUITE, "lidar.hfov", "parameter lidar.hfov names sensor 'lidar', not in the suite (radar, camera)"),
     (SUITE, "camera.snr", "unknown camera parameter 'snr' (known: "),
+    (SUITE, "radar.camera.hfov", "parameter camera.hfov names sensor 'camera', not in this problem (radar)"),
 ])
 def test_unknown_and_foreign_names_are_refused_with_the_known_ones(sensor, name, message):
     with pytest.raises(InputError) as info:
