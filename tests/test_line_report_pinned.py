@@ -28,7 +28,7 @@ def _soft_e(r):
 
 
 class FakeEvaluator:
-    """E_soft = 1 + r^2/100 (with a zero at r = 7 and a rounding-negative E^2 at r = 8),
+    """E_soft = 1 + r^2/100 (but 0 at r = 7, a rounding-negative E^2 at r = 8 and 0.5 m at 9),
     E_hard = 2 + r/1000, E_ref with minima 3 m at 12 and 3.5 m at 30, SE r/100; per-scenario RMSE rows and
     a detection timeline [N=2, T=3, V=4] that encode r."""
 
@@ -45,6 +45,8 @@ class FakeEvaluator:
             return 0.0, [5.0]
         if r == 8.0:
             return -1e-18, [5.0]
+        if r == 9.0:
+            return 0.25, [0.3]  # E = 0.5 m: dE/dr = 0.3 / (2 x 0.5)
         e = _soft_e(r)
         return e * e, [2.0 * e * r / 50.0]
 
@@ -114,10 +116,10 @@ def test_curves_evaluate_sweep_r_star_and_extra_points_at_the_last_temperature()
     assert set(no_schedule.taus) == {1.0}
 
 
-def test_a_zero_or_rounding_negative_e_has_slope_0():
-    result = SimpleNamespace(r_star=7.0, sweep=[SimpleNamespace(r=8.0)], tau_schedule=(1.0,))
-    c = curves(FakeEvaluator(), _objective(), result, 7.0, 8.0, 0, hard_only=False)
-    assert c.E_soft == (0.0, 0.0) and c.dE_dr == (0.0, 0.0)
+def test_a_zero_or_rounding_negative_e_has_slope_0_and_a_small_one_its_own():
+    result = SimpleNamespace(r_star=7.0, sweep=[SimpleNamespace(r=8.0), SimpleNamespace(r=9.0)], tau_schedule=(1.0,))
+    c = curves(FakeEvaluator(), _objective(), result, 7.0, 9.0, 0, hard_only=False)
+    assert c.E_soft == (0.0, 0.0, 0.5) and c.dE_dr == pytest.approx((0.0, 0.0, 0.3), rel=1e-15)
 
 
 def test_hard_only_curves_repeat_e_hard_with_no_slope():
@@ -166,7 +168,14 @@ def test_the_dense_check_finds_the_best_grid_point_and_judges_r_star():
     # Within half a spacing (2.5) of the basin r* is in it; past that, in the other basin.
     assert dense_check(ev, _result(r_star=22.5), 0.0, 30.0, 5.0)["in_basin"] is True
     far = dense_check(ev, _result(r_star=27.0), 0.0, 30.0, 5.0)
-    assert far["in_basin"] is False and far["verdict"].startswith("r*=27 lies outside the basin [0, 20]")
+    assert far["in_basin"] is False and far["verdict"] == (
+        "r*=27 lies outside the basin [0, 20] of the best dense point r=10 (E_hard=3.4 m); "
+        "E_hard(r*)=4.4 m is worse by 1 m: inside the bracket the soft objective's minimum misses the hard basin")
+    beside = _result(r_star=27.0)
+    beside.bracket = (20.0, 40.0)  # the solve searched beside the best point
+    assert dense_check(ev, beside, 0.0, 30.0, 5.0)["verdict"].endswith(
+        "is worse by 1 m: the stepped sweep's best step does not bracket the dense optimum (the steps are "
+        "coarser than the basin)")
     assert far["E_ref_star"] == pytest.approx(4.4) and far["E_ref_star_minus_best"] == pytest.approx(1.0)
 
 
