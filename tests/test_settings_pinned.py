@@ -52,11 +52,12 @@ def test_every_problem_key_reaches_its_keyword(tmp_path):
     fields = problem_fields(settings)
     solve = fields.pop("solve")
     assert solve.max_evaluations == 11 and solve is settings.solve
-    assert fields == dict(
-        sensor="camera", params={"width_px": (800.0, 1600.0)}, scenarios=("sc02", "sc05"), variants=3, seed=7,
-        predictor="weights.msgpack", fill="interp", estimator=EstimatorConfig(kind="mc", samples=4), profile="paper",
-        sensor_config="mine.toml", prediction_stride_frames=6, background_vehicles=2, float64=False,
-        predictor_dtype="float64", objective="tracked", miss_penalty_m2=64.0, extra_curve_points=5)
+    assert fields == {
+        "sensor": "camera", "params": {"width_px": (800.0, 1600.0)}, "scenarios": ("sc02", "sc05"), "variants": 3,
+        "seed": 7, "predictor": "weights.msgpack", "fill": "interp", "estimator": EstimatorConfig(kind="mc", samples=4),
+        "profile": "paper", "sensor_config": "mine.toml", "prediction_stride_frames": 6, "background_vehicles": 2,
+        "float64": False, "predictor_dtype": "float64", "objective": "tracked", "miss_penalty_m2": 64.0,
+        "extra_curve_points": 5}
 
 
 def test_the_shipped_defaults_and_their_empty_strings():
