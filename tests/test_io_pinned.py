@@ -144,6 +144,13 @@ def test_an_output_path_that_is_a_file_is_named_as_such(tmp_path):
                                 f"{tmp_path / 'f'}, which exists and is not a folder")
 
 
+def _abandon() -> None:
+    """`abandon_temporaries`, then the registry's lock given back: it keeps the lock for a
+    process about to end, and this one goes on."""
+    _io.abandon_temporaries()
+    _io._LOCK.release()
+
+
 def test_abandoned_temporaries_are_removed_contents_first_whatever_is_left_of_them(tmp_path):
     made = tmp_path / "made"  # a folder made for a set, then a staging tree and a file inside it
     made.mkdir()
@@ -157,17 +164,18 @@ def test_abandoned_temporaries_are_removed_contents_first_whatever_is_left_of_th
     (kept / "user.txt").write_text("the user's")
     entries = [(made, "dir"), (staging, "tree"), (tmp_file, "file"), (kept, "dir"),
                (tmp_path / "gone.tmp", "file"), (tmp_path / "gone-tree", "tree"), (tmp_path / "gone-dir", "dir")]
+    for path, kind in entries:
+        _io.register_temporary(path, kind)
     try:
-        for path, kind in entries:
-            _io.register_temporary(path, kind)
         assert {p: k for p, k in _io._TEMPORARIES.items() if p.startswith(str(tmp_path))} == {
             str(p): k for p, k in entries}
-        _io.abandon_temporaries()  # nothing raises for the entries already gone
-        assert not made.exists()
-        assert (kept / "user.txt").read_text() == "the user's"
-        assert _io._TEMPORARIES == {}
+        _abandon()  # nothing raises for the entries already gone
     finally:
-        _io._LOCK.release()  # abandon_temporaries keeps the lock for a process about to end
+        for path, _ in entries:
+            _io.release_temporary(path)
+    assert not made.exists()
+    assert (kept / "user.txt").read_text() == "the user's"
+    assert _io._TEMPORARIES == {}
 
 
 def test_a_released_temporary_is_left_alone_and_a_tree_is_the_default(tmp_path):
@@ -176,14 +184,11 @@ def test_a_released_temporary_is_left_alone_and_a_tree_is_the_default(tmp_path):
     tree = tmp_path / "staging"
     (tree / "sub").mkdir(parents=True)
     (tree / "sub" / "x.bin").write_bytes(b"x")
-    try:
-        _io.register_temporary(tree)  # a folder and all it holds
-        _io.register_temporary(f, "file")
-        _io.release_temporary(f)
-        _io.release_temporary(tmp_path / "never-registered")
-        _io.abandon_temporaries()
-    finally:
-        _io._LOCK.release()
+    _io.register_temporary(tree)  # a folder and all it holds
+    _io.register_temporary(f, "file")
+    _io.release_temporary(f)
+    _io.release_temporary(tmp_path / "never-registered")
+    _abandon()
     assert f.read_bytes() == b"done" and not tree.exists()
 
 
