@@ -53,6 +53,6 @@ def explain(flags: Sequence[str], intervals: Sequence[Sequence[float]], unit: st
     if "pressing_on_bound" in flags:
         words.append("r* presses on a bound of the interval: the best value may lie outside it; widen the interval")
     if "flat" in flags:
-        spans = ", ".join(f"[{a:.4g}, {b:.4g}] {unit}" for a, b in intervals)
+        spans = ", ".join(f"[{a:.4g}, {b:.4g}]" + (f" {unit}" if unit else "") for a, b in intervals)
         words.append(f"E is flat around r*: every evaluated value in {spans} is as good to the tolerance")
     return words

@@ -87,6 +87,8 @@ def test_explain_words_each_flag():
                      "is as good to the tolerance")]
     assert explain(["pressing_on_bound", "flat"], [[0.0, 10.0]], "m") == [
         bound, "E is flat around r*: every evaluated value in [0, 10] m is as good to the tolerance"]
+    assert explain(["flat"], [[0.0, 10.0]], "") == [  # no unit: no space for one
+        "E is flat around r*: every evaluated value in [0, 10] is as good to the tolerance"]
 
 
 RADAR, CAMERA = Radar.from_toml(), Camera.from_toml()
