@@ -1,0 +1,143 @@
+"""The main job's own bookkeeping, pinned: the evaluations it plans, the memory it estimates,
+the config it records, the predictor's precision, the seed's keys, and how `optimise` wires a
+one-parameter solve into its Result (on the toy pipeline: one tiny scene, three instants)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffsense as ds
+from diffsense._optimise import (
+    _config,
+    _in_dtype,
+    memory_estimate_bytes,
+    planned_evaluations,
+    seed_keys,
+)
+from diffsense.metrics import make_objective
+from diffsense.predictors import CastPredictor, init_predictor
+from diffsense.sensors import make_sensor
+from diffsense.solve import SolveConfig
+from diffsense.tracks import prediction_frames
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
+
+H = "hfov_deg"
+
+
+def test_the_planned_evaluations_count_the_sweep_twice_the_budget_the_answer_curves_and_dense_grid():
+    assert planned_evaluations(ds.Problem()) == 2 * 6 + 20 + 2  # steps 30, 60, ..., 180
+    problem = ds.Problem(steps=[30, 60, 90], extra_curve_points=5, dense_check=10.0,
+                         solve=SolveConfig(max_evaluations=12))
+    assert planned_evaluations(problem) == 2 * 3 + 12 + 2 + 2 * 5 + (150 // 10 + 1)
+    # 70 / 0.7 is 100.00000000000001 in floats: still 100 steps, 101 points
+    assert planned_evaluations(ds.Problem(params={"hfov": (30, 100)}, steps=[30, 100], dense_check=0.7)) == \
+        2 * 2 + 20 + 2 + 101
+
+
+def test_the_memory_estimate_is_variants_frames_vehicles_and_fields(tmp_path):
+    # sc01 runs 20 s at 10 Hz (201 frames) with 5 vehicles and no background ones
+    assert memory_estimate_bytes(ds.Problem(scenarios=["sc01"], variants=2)) == 2 * 201 * 5 * 8 * 20
+    problem = ds.Problem(scenarios=["sc01", "sc02"], variants=3, float64=False, background_vehicles=10,
+                         estimator=ds.metrics.EstimatorConfig(kind="mc", samples=6))
+    assert memory_estimate_bytes(problem) == 2 * 3 * 201 * 15 * 4 * (6 + 20)
+    assert memory_estimate_bytes(ds.Problem(scenarios=["sc01"], estimator="mean-field", float64=False)) == \
+        8 * 201 * 5 * 4 * 20  # the Monte-Carlo draws only for "mc"
+    csv = tmp_path / "t.csv"
+    csv.write_text("")
+    assert memory_estimate_bytes(ds.Problem(scenes=f"ngsim:{csv}")) == 0
+
+
+def test_the_recorded_config_names_the_sensor_the_predictor_and_the_params():
+    config = _config(ds.Problem(params={"hfov": (30, 90)}, variants=3))
+    assert config["sensor"] == "radar" and config["params"] == {H: [30.0, 90.0]} and config["variants"] == 3
+    assert config["predictor"] == "" and config["solve"]["max_evaluations"] == 20 and config["weather"] is None
+    suite = ds.Problem(sensor=[make_sensor("radar"), "camera"], params={"camera.hfov": (30, 60)},
+                       predictor=ToyPredictor(jnp.asarray(TOY_GAIN)))
+    config = _config(suite)
+    assert config["sensor"] == ["radar", "camera"] and config["predictor"] == "ToyPredictor"
+    assert config["params"] == {"camera.hfov_deg": [30.0, 60.0]}
+    assert set(config) == {f for f in ds.Problem.__dataclass_fields__}
+
+
+def test_the_predictor_computes_in_the_precision_asked_for():
+    toy = ToyPredictor(jnp.asarray(TOY_GAIN))
+    assert _in_dtype(toy, "auto", jnp.float64) is toy and _in_dtype(toy, "float64", jnp.float64) is toy
+    cast = _in_dtype(toy, "float32", jnp.float64)
+    assert isinstance(cast, CastPredictor) and cast.inner is toy and cast.dtype == "float32"
+    assert _in_dtype(toy, "float32", jnp.float32) is toy
+    cs_lstm = init_predictor()
+    cast = _in_dtype(cs_lstm, "auto", jnp.float64)  # the CS-LSTM in float32, its weights' precision
+    assert isinstance(cast, CastPredictor) and cast.inner is cs_lstm and cast.dtype == "float32"
+    assert _in_dtype(cs_lstm, "auto", jnp.float32) is cs_lstm
+    recast = _in_dtype(CastPredictor(inner=cs_lstm, dtype="float64"), "auto", jnp.float64)
+    assert recast.inner is cs_lstm and recast.dtype == "float32"  # never two casts deep
+
+
+@pytest.mark.parametrize("seed", [0, 7, 2**32 - 1])
+def test_the_seeds_keys_are_the_split_of_its_prng_key_bit_for_bit(seed):
+    scenes_key, draws_key = seed_keys(seed)
+    expected = jax.random.split(jax.random.PRNGKey(seed))
+    np.testing.assert_array_equal(np.asarray(scenes_key), np.asarray(expected[0]))
+    np.testing.assert_array_equal(np.asarray(draws_key), np.asarray(expected[1]))
+
+
+@pytest.fixture(scope="module")
+def solved():
+    scenes, scenario = toy_scenes(1)
+    frames = prediction_frames(scenes.num_frames)[:3]
+    problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0), dense_check=40.0, extra_curve_points=4,
+                         solve=SolveConfig(max_evaluations=9), scenarios=["sc01"])
+    E = make_objective(scenes, scenario, frames, problem.make_sensor(), ToyPredictor(jnp.asarray(TOY_GAIN)),
+                       names=(H,), shard=False)
+    lines, events = [], []
+    result = ds.optimise(problem, E=E, progress=lines.append, on_evaluation=events.append)
+    return problem, result, lines, events
+
+
+def test_a_one_parameter_solve_is_wired_into_its_result(solved):
+    problem, result, _, _ = solved
+    s = result.solve
+    assert result.r_star == {H: s.r_star} and type(result.r_star[H]) is float
+    assert result.E_hard_star == s.E_hard_star and result.E_soft_star == s.E_soft_star
+    assert result.params == {H: (20.0, 100.0)} and result.units == {H: "deg"} and result.sensor == "radar"
+    assert [p.r for p in s.sweep] == [20.0, 60.0, 100.0] and result.scenarios == ("scenario0",)
+    assert result.config == _config(problem) and result.reference["answer_on"] == "E_hard"
+    assert result.curves is not None and list(result.curves.r) == sorted(result.curves.r)
+    assert set(result.wall_s) == {"compile", "run", "programs_compiled", "programs_lowered"}
+    assert result.near_optimal["intervals"] and result.flags == tuple(result.to_json()["flags"])
+
+
+def test_the_dense_check_and_its_note(solved):
+    _, result, _, _ = solved
+    assert result.dense_check["step"] == 40.0 and result.dense_check["evaluations"] == 3  # 20, 60, 100
+    assert result.notes[-1] == "dense check: " + result.dense_check["verdict"]
+
+
+def test_progress_lines_and_events(solved):
+    problem, result, lines, events = solved
+    assert lines[0] == "radar: simulating 1 scenarios x 8 variants; ground-truth predictions"
+    assert lines[1] == "radar: stepped sweep and continuous solve of hfov_deg over [20, 100] deg"
+    assert lines[2] == f"radar: r* = {result.r_star[H]:.5g} deg, E_hard(r*) = {result.E_hard_star:.4f} m"
+    assert lines[3] == "radar: dense reference grid every 40 deg" and len(lines) == 4
+    planned = planned_evaluations(problem)
+    assert all(e["planned"] == planned for e in events)
+    assert [e["done"] for e in events] == list(range(1, len(events) + 1))
+    solve, figures = result.programs_run["solve"], result.programs_run["figures"]
+    assert sum(solve.values()) + sum(figures.values()) == len(events) and sum(figures.values()) > 0
+
+
+def test_a_cost_weight_makes_one_parameter_a_box_solve(monkeypatch):
+    from diffsense import _suite_solve
+
+    called = []
+    monkeypatch.setattr(_suite_solve, "optimise_box", lambda problem, *a: called.append(problem) or "box")
+    problem = ds.Problem(cost_weight=0.5)
+    assert ds.optimise(problem) == "box" and called == [problem]
+
+
+def test_an_unknown_odd_parameter_is_refused_before_any_work():
+    with pytest.raises(ds.InputError, match="no sensitivity to 'snow'"):
+        ds.optimise(ds.Problem(predictor=object()), sensitivity=("snow",))
