@@ -1,12 +1,10 @@
 """The main job's own bookkeeping, pinned: the evaluations it plans, the memory it estimates,
-the config it records, the predictor's precision, the seed's keys, and how `optimise` wires a
+the config it records, the predictor's precision, and how `optimise` wires a
 one-parameter solve into its Result (on the toy pipeline: one tiny scene, three instants)."""
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
-import numpy as np
 import pytest
 
 import diffsense as ds
@@ -15,7 +13,6 @@ from diffsense._optimise import (
     _in_dtype,
     memory_estimate_bytes,
     planned_evaluations,
-    seed_keys,
 )
 from diffsense.metrics import make_objective
 from diffsense.predictors import CastPredictor, init_predictor
@@ -74,14 +71,6 @@ def test_the_predictor_computes_in_the_precision_asked_for():
     assert _in_dtype(cs_lstm, "auto", jnp.float32) is cs_lstm
     recast = _in_dtype(CastPredictor(inner=cs_lstm, dtype="float64"), "auto", jnp.float64)
     assert recast.inner is cs_lstm and recast.dtype == "float32"  # never two casts deep
-
-
-@pytest.mark.parametrize("seed", [0, 7, 2**32 - 1])
-def test_the_seeds_keys_are_the_split_of_its_prng_key_bit_for_bit(seed):
-    scenes_key, draws_key = seed_keys(seed)
-    expected = jax.random.split(jax.random.PRNGKey(seed))
-    np.testing.assert_array_equal(np.asarray(scenes_key), np.asarray(expected[0]))
-    np.testing.assert_array_equal(np.asarray(draws_key), np.asarray(expected[1]))
 
 
 @pytest.fixture(scope="module")
