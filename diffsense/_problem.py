@@ -237,7 +237,9 @@ def _suite_with_configs(sensor: Any, configs: Mapping[str, str], profile: str) -
             raise InputError(f"sensor_config for {name!r}: that member is a Sensor object, which carries its own constants")
         if not isinstance(path, (str, Path)):
             raise InputError(f"sensor_config for {name!r} must be a TOML path, got {path!r}")
-    return Suite([make_sensor(s, configs.get(s), profile) if isinstance(s, str) else s for s in sensor])
+    # A Sensor object member goes through make_sensor too: under another profile than "physical"
+    # it is refused, as it is without a sensor_config (it carries its own constants).
+    return Suite([make_sensor(s, configs.get(s) if isinstance(s, str) else None, profile) for s in sensor])
 
 
 def _check_int(name: str, value: Any, lo: int, hi: int) -> None:

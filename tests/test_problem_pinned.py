@@ -63,7 +63,7 @@ def test_an_empty_scenario_name_is_refused(scenarios):
     _refused("at least one scenario is needed (an empty name was given)", scenarios=scenarios)
 
 
-def test_a_scenario_named_twice_is_named_first_in_order():
+def test_of_scenarios_named_twice_the_first_by_name_is_named():
     _refused("scenario named twice: sc02", scenarios=["sc03", "sc02", "sc03", "sc02"])
     _refused("scenario named twice: sc01", scenarios="sc01, sc01")
 
@@ -173,6 +173,15 @@ def test_sensor_configs_by_member_name(tmp_path):
     p = ds.Problem(sensor=["radar", "camera"], params={"radar.hfov": (30, 60)}, sensor_config={"radar": str(toml)})
     radar, camera = p.make_sensor().members
     assert radar.config.snr_threshold_db == 10.0 and camera.kind == "camera"
+    paper = ds.Problem(sensor=["radar", "camera"], params={"radar.hfov": (30, 60)}, sensor_config={"radar": str(toml)},
+                       profile="paper")
+    radar, camera = paper.make_sensor().members  # the member not named keeps its profile's constants
+    assert radar.config.snr_threshold_db == 10.0 and camera.config == make_sensor("camera", None, "paper").config
+    assert camera.config != make_sensor("camera").config
+    obj = make_sensor("radar")
+    toml.with_name("camera.toml").write_text("")
+    assert ds.Problem(sensor=(obj, "camera"), params={"camera.hfov": (30, 60)},
+                      sensor_config={"camera": str(toml.with_name("camera.toml"))}).make_sensor().members[0] is obj
     assert ds.Problem(sensor=("radar", "camera"), params={"radar.hfov": (30, 60)}).make_sensor().members[0].config.snr_threshold_db == 13.2
 
 
@@ -190,6 +199,15 @@ def test_sensor_configs_by_member_name(tmp_path):
 ])
 def test_sensor_configs_by_member_name_refused(fields, message):
     _refused(message, params={"radar.hfov": (30, 60)}, **fields)
+
+
+def test_a_sensor_object_under_another_profile_is_refused_with_or_without_configs(tmp_path):
+    toml = tmp_path / "camera.toml"
+    toml.write_text("")
+    message = "a Sensor object carries its own constants: give no sensor config or profile with it"
+    for configs in (None, {"camera": str(toml)}):
+        _refused(message, sensor=(make_sensor("radar"), "camera"), params={"camera.hfov": (30, 60)},
+                 profile="paper", sensor_config=configs)
 
 
 def test_from_toml_keeps_the_files_values_under_overrides(tmp_path):
