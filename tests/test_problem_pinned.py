@@ -127,7 +127,8 @@ def test_the_predictor_dtype_and_its_refusals():
 
 
 def test_recorded_scenes_are_named_by_kind_and_must_be_a_file(tmp_path):
-    csv = tmp_path / "01_tracks.csv"
+    (tmp_path / "a:b").mkdir()
+    csv = tmp_path / "a:b" / "01_tracks.csv"  # the kind ends at the first colon
     csv.write_text("")
     assert ds.Problem(scenes=f"highd:{csv}").scenes == f"highd:{csv}"
     assert ds.Problem(scenes=f"ngsim:{csv}").scenes == f"ngsim:{csv}"
@@ -145,7 +146,8 @@ def test_the_traffic_speed_offset_is_a_finite_float():
 
 
 def test_the_objective_and_its_miss_penalty():
-    assert ds.Problem(objective="tracked", miss_penalty_m2=0).miss_penalty_m2 == 0.0
+    p = ds.Problem(objective="tracked", miss_penalty_m2=0)
+    assert p.miss_penalty_m2 == 0.0 and type(p.miss_penalty_m2) is float
     _refused("unknown objective 'rmse' (known: eq12, tracked)", objective="rmse")
     _refused("miss_penalty_m2 must be >= 0, got -1", miss_penalty_m2=-1)
     _refused("miss_penalty_m2 must be numbers, got 'high'", miss_penalty_m2="high")
@@ -161,10 +163,20 @@ def test_steps_are_floats_for_one_parameter_only():
 def test_the_dense_check_step_is_positive_and_makes_at_most_100000_points():
     assert ds.Problem(params={"hfov": (30, 130)}, dense_check=0.001).dense_check == 0.001  # exactly 100,000
     _refused("dense_check 0.00099 makes over 100,000 points on [30, 130]", params={"hfov": (30, 130)}, dense_check=0.00099)
+    _refused("dense_check 0.000999995 makes over 100,000 points on [30, 130]", params={"hfov": (30, 130)},
+             dense_check=0.000999995)  # 100,000.5 steps
     for bad in (0, -1.0, math.nan, math.inf):
         _refused(f"dense_check must be a positive step, got {bad}", dense_check=bad)
     _refused("dense_check applies to one-parameter problems only",
              params={"hfov": (30, 60), "range": (40, 90)}, dense_check=1.0)
+
+
+def test_one_sensor_takes_the_profile_and_the_sensor_config(tmp_path):
+    toml = tmp_path / "radar.toml"
+    toml.write_text("snr_threshold_db = 10.0\n")
+    assert ds.Problem(sensor_config=str(toml)).make_sensor().config.snr_threshold_db == 10.0
+    paper = ds.Problem(profile="paper").make_sensor().config
+    assert paper == make_sensor("radar", None, "paper").config and paper != make_sensor("radar").config
 
 
 def test_sensor_configs_by_member_name(tmp_path):
