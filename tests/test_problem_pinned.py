@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import math
 
+import jax
+import jax.numpy as jnp
 import pytest
 
 import diffsense as ds
 from diffsense.errors import InputError
 from diffsense.metrics import EstimatorConfig
 from diffsense.sensors import Suite, make_sensor
+from tests._toy_pipeline import ToySensor
 
 
 def _refused(message: str, **fields):
@@ -211,6 +214,20 @@ def test_sensor_configs_by_member_name(tmp_path):
 ])
 def test_sensor_configs_by_member_name_refused(fields, message):
     _refused(message, params={"radar.hfov": (30, 60)}, **fields)
+
+
+class _ArraySensor(ToySensor):
+    """A user's sensor holding an array: unhashable, so never looked up in a dict."""
+
+    gain: jax.Array
+
+
+def test_a_sensor_object_holding_an_array_joins_a_suite_with_configs():
+    sensor = _ArraySensor(gain=jnp.ones(2))
+    problem = ds.Problem(sensor=(sensor, "camera"), params={"camera.hfov": (30, 60)},
+                         sensor_config={"camera": "configs/sensors/laws/camera_confidence.toml"})
+    toy, camera = problem.make_sensor().members
+    assert toy is sensor and camera.config.detection.law == "confidence"
 
 
 def test_a_sensor_object_under_another_profile_is_refused_with_or_without_configs(tmp_path):
