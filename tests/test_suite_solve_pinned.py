@@ -13,12 +13,14 @@ import jax
 import pytest
 
 import diffsense as ds
+from diffsense._domain import domain_note
 from diffsense._suite_solve import (
     ParetoFront,
     _functions,
     _on_hard,
     _planned,
     check_lambdas,
+    pareto,
 )
 from diffsense.errors import InputError
 from diffsense.metrics import make_objective
@@ -97,10 +99,17 @@ def test_pareto_json(judged_on):
                                  "source": d.source, "evaluations": d.counts}
 
 
-def _toy_objective(problem):
+class _ValidatedToy(ToyPredictor):
+    """The toy predictor with a validation RMSE so small that every scene lies outside its domain."""
+
+    validation_rmse_m: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
+
+
+def _toy_objective(problem, predictor=None):
     scenes, scenario = toy_scenes(1)
     frames = prediction_frames(scenes.num_frames)[:3]
-    return make_objective(scenes, scenario, frames, problem.make_sensor(), ToyPredictor(jax.numpy.asarray(TOY_GAIN)),
+    predictor = ToyPredictor(jax.numpy.asarray(TOY_GAIN)) if predictor is None else predictor
+    return make_objective(scenes, scenario, frames, problem.make_sensor(), predictor,
                           names=tuple(PARAMS), key=jax.random.key(2, impl="rbg"))
 
 
@@ -124,7 +133,7 @@ def boxed():
     problem = _problem(box=BoxConfig(samples=4, starts=1, tau_schedule=(2.0, 1.0), max_steps=3, max_soft=6,
                                       bound_tol=0.02),
                        cost_weight=1.0, scenarios=["sc01"])
-    E = _toy_objective(problem)
+    E = _toy_objective(problem, _ValidatedToy(jax.numpy.asarray(TOY_GAIN)))
     lines, events = [], []
     return problem, ds.optimise(problem, E=E, progress=lines.append, on_evaluation=events.append), lines, events
 
@@ -150,5 +159,31 @@ def test_a_parameter_on_its_bound_is_noted(boxed):
     result = boxed[1]  # a cost weight of 1 m per EUR: the cheapest design, both parameters on their lower bounds
     assert result.box.on_bound == {"radar.range_m": "lower", "camera.width_px": "lower"}
     assert result.r_star == {"radar.range_m": 30.0, "camera.width_px": 640.0}
-    assert result.box_notes == ("radar.range_m is on its lower bound", "camera.width_px is on its lower bound")
+    assert result.domain["validation_rmse_m"] == (0.01, 0.02, 0.03, 0.04, 0.05)
+    assert result.domain["outside"] == ["scenario0"]
+    assert result.box_notes == ("radar.range_m is on its lower bound", "camera.width_px is on its lower bound",
+                                domain_note(result.domain))
     assert result.notes == result.box_notes and result.on_bound is True
+
+
+def test_a_pareto_sweep_builds_its_objective_seeds_its_solves_and_says_each_lambda(monkeypatch):
+    from diffsense import _optimise, _suite_solve
+
+    problem = _problem(box=BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3), seed=5)
+    built, configs = [], []
+    E = _toy_objective(problem)
+    monkeypatch.setattr(_optimise, "objective", lambda p, predictor=None: built.append((p, predictor)) or E)
+    sweep = _suite_solve.pareto_sweep
+    monkeypatch.setattr(_suite_solve, "pareto_sweep",
+                        lambda fns, params, lambdas, config, **kw: configs.append(config) or sweep(fns, params, lambdas,
+                                                                                                   config, **kw))
+    lines = []
+    front = pareto(problem, [0.01, 0.0], predictor="toy", progress=lines.append)
+    assert built == [(problem, "toy")] and configs[0].seed == 5 and configs[0].max_soft == 3
+    assert front.lambdas == (0.0, 0.01) and isinstance(front.wall_s, float) and front.wall_s > 0
+    assert lines[0] == "radar+camera: simulating 6 scenarios x 8 variants"
+    for k, (lam, design) in enumerate(zip(front.lambdas, front.designs)):
+        assert lines[k + 1] == (f"radar+camera: lambda {lam:g} ({k + 1}/2): E_hard {design.E_hard:.4f} m, "
+                                f"cost {design.cost:.2f}, {design.counts['soft']} value-and-gradient + "
+                                f"{design.counts['hard']} hard")
+    assert len(lines) == 3
