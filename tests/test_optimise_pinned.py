@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import pytest
 
 import diffsense as ds
+from diffsense._domain import domain_note
 from diffsense._optimise import (
     _config,
     _in_dtype,
@@ -73,14 +74,23 @@ def test_the_predictor_computes_in_the_precision_asked_for():
     assert recast.inner is cs_lstm and recast.dtype == "float32"  # never two casts deep
 
 
-@pytest.fixture(scope="module")
-def solved():
+class _ValidatedToy(ToyPredictor):
+    """The toy predictor with a validation RMSE so small that every scene lies outside its domain."""
+
+    validation_rmse_m: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
+
+
+def _toy_objective(problem, predictor):
     scenes, scenario = toy_scenes(1)
     frames = prediction_frames(scenes.num_frames)[:3]
+    return make_objective(scenes, scenario, frames, problem.make_sensor(), predictor, names=(H,), shard=False)
+
+
+@pytest.fixture(scope="module")
+def solved():
     problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0), dense_check=40.0, extra_curve_points=4,
                          solve=SolveConfig(max_evaluations=9), scenarios=["sc01"])
-    E = make_objective(scenes, scenario, frames, problem.make_sensor(), ToyPredictor(jnp.asarray(TOY_GAIN)),
-                       names=(H,), shard=False)
+    E = _toy_objective(problem, _ValidatedToy(jnp.asarray(TOY_GAIN)))
     lines, events = [], []
     result = ds.optimise(problem, E=E, progress=lines.append, on_evaluation=events.append)
     return problem, result, lines, events
@@ -99,14 +109,18 @@ def test_a_one_parameter_solve_is_wired_into_its_result(solved):
     assert result.near_optimal["intervals"] and result.flags == tuple(result.to_json()["flags"])
 
 
-def test_the_dense_check_and_its_note(solved):
-    _, result, _, _ = solved
+def test_the_dense_check_and_the_domain_note_end_the_notes(solved):
+    _, result, lines, _ = solved
     assert result.dense_check["step"] == 40.0 and result.dense_check["evaluations"] == 3  # 20, 60, 100
-    assert result.notes[-1] == "dense check: " + result.dense_check["verdict"]
+    assert result.domain["validation_rmse_m"] == (0.01, 0.02, 0.03, 0.04, 0.05)
+    assert result.domain["outside"] == ["scenario0"]
+    assert result.notes[-2:] == ("dense check: " + result.dense_check["verdict"], domain_note(result.domain))
+    assert lines[1] == "warning: " + domain_note(result.domain)  # before the solve starts
 
 
 def test_progress_lines_and_events(solved):
     problem, result, lines, events = solved
+    lines = [line for line in lines if not line.startswith("warning: ")]
     assert lines[0] == "radar: simulating 1 scenarios x 8 variants; ground-truth predictions"
     assert lines[1] == "radar: stepped sweep and continuous solve of hfov_deg over [20, 100] deg"
     assert lines[2] == f"radar: r* = {result.r_star[H]:.5g} deg, E_hard(r*) = {result.E_hard_star:.4f} m"
@@ -130,3 +144,42 @@ def test_a_cost_weight_makes_one_parameter_a_box_solve(monkeypatch):
 def test_an_unknown_odd_parameter_is_refused_before_any_work():
     with pytest.raises(ds.InputError, match="no sensitivity to 'snow'"):
         ds.optimise(ds.Problem(predictor=object()), sensitivity=("snow",))
+
+
+def test_the_hard_estimator_searches_the_steps_it_is_given():
+    problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 45.0, 100.0), estimator="hard",
+                         solve=SolveConfig(max_evaluations=9), scenarios=["sc01"])
+    result = ds.optimise(problem, E=_toy_objective(problem, ToyPredictor(jnp.asarray(TOY_GAIN))), figures=False)
+    assert [p.r for p in result.solve.sweep] == [20.0, 45.0, 100.0]
+    assert result.solve.evaluations["objective"] <= 9 and result.reference["answer_on"] == "E_hard"
+
+
+def test_sensitivity_is_asked_for_at_the_answer_and_kept(solved, monkeypatch):
+    from diffsense import _sensitivity
+
+    problem, result, _, _ = solved
+    asked = []
+    monkeypatch.setattr(_sensitivity, "sensitivity",
+                        lambda p, out, theta, E: asked.append((p, out.r_star, theta)) or {"rain_mm_h": {H: 0.5}})
+    monkeypatch.setattr(ds._optimise, "_optimise_line", lambda *a: (result, "E"))
+    lines = []
+    out = ds.optimise(problem, sensitivity=("rain_mm_h",), progress=lines.append)
+    assert asked == [(problem, result.r_star, ("rain_mm_h",))] and out.sensitivity == {"rain_mm_h": {H: 0.5}}
+    assert out.r_star == result.r_star
+    assert lines == ["radar: dr*/dtheta for rain_mm_h (implicit function theorem)"]
+
+
+@pytest.mark.parametrize("distributed, kwargs", [(True, {}), ({"process_id": 1, "num_processes": 2}, None)])
+def test_a_distributed_run_is_joined_first(monkeypatch, distributed, kwargs):
+    from diffsense import _distributed
+
+    class Joined(Exception):
+        pass
+
+    def initialize(**given):
+        raise Joined(given)
+
+    monkeypatch.setattr(_distributed, "initialize", initialize)
+    with pytest.raises(Joined) as joined:
+        ds.optimise(ds.Problem(), distributed=distributed)
+    assert joined.value.args[0] == (distributed if kwargs is None else kwargs)
