@@ -9,6 +9,7 @@ import pytest
 
 from diffsense.report._tables import (
     _cell,
+    _r,
     box_table,
     breakdown_table,
     comparison_table,
@@ -79,6 +80,16 @@ def test_the_summary_judged_on_e_ref_on_a_bound_with_flags_and_a_scale():
     ]
 
 
+def test_r_is_shown_converted_to_five_digits_or_as_a_dash():
+    assert (_r(None, 57.3), _r(0.5, 2.0), _r(123.456789, 1.0)) == ("-", "1", "123.46")
+
+
+def test_a_summary_without_notes_or_flags_and_a_sensitivity_to_two_parameters():
+    result = {k: v for k, v in _line().items() if k not in ("notes", "flags", "near_optimal")}
+    result["sensitivity"] = {"rain_mm_h": {"hfov_deg": 0.25, "range_m": None}}
+    assert summary_table(result).splitlines()[-1] == "dr*/drain_mm_h: hfov_deg +0.25, range_m undefined"
+
+
 def test_the_best_step_is_the_first_of_equals():
     sweep = [{"r": 1.0, "E_hard": 2.0, "E_soft": 2.0}, {"r": 2.0, "E_hard": 2.0, "E_soft": 1.0}]
     rows = summary_table(_line(sweep=sweep, sensitivity=None, notes=[])).splitlines()
@@ -107,6 +118,15 @@ def test_the_comparison_of_two_sensors():
         "r* on bound         no     yes",
         "best: camera at r* = 30 (E_hard = 3.5000 m)",
     ]
+
+
+def test_the_comparison_without_a_unit_names_the_first_sensors_parameter_and_the_lowest_e_wins():
+    pair = _pair()
+    pair["camera"] = pair["camera"] | {"param": "camera.hfov_deg", "E_hard_star": 4.5}
+    lines = comparison_table(pair).splitlines()
+    assert lines[0] == "radar vs camera: hfov_deg, E_RMSE [m] between GT-input and sensor-input predictions"
+    assert lines[-1] == "best: radar at r* = 55.123 (E_hard = 3.9000 m)"
+    assert comparison_table(pair, unit="deg").startswith("radar vs camera: hfov_deg [deg], ")
 
 
 def test_the_comparison_needs_results_on_the_same_steps():
@@ -159,6 +179,13 @@ def test_the_box_summary():
          "40 value-and-gradient + 9 hard evaluations"),
         "note: radar.range_m is on its lower bound",
     ]
+
+
+def test_a_box_summary_without_notes_or_soft_evaluations():
+    result = {k: v for k, v in _box().items() if k != "notes"}
+    result["box"] = result["box"] | {"counts": {"hard": 2}}
+    lines = box_table(result).splitlines()
+    assert lines[-1].endswith("0 value-and-gradient + 2 hard evaluations") and len(lines) == 6
 
 
 def test_the_box_summary_judged_on_e_ref():
