@@ -4,7 +4,9 @@ one-parameter solve into its Result (on the toy pipeline: one tiny scene, three 
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 import diffsense as ds
@@ -130,6 +132,7 @@ def test_progress_lines_and_events(solved):
     assert [e["done"] for e in events] == list(range(1, len(events) + 1))
     solve, figures = result.programs_run["solve"], result.programs_run["figures"]
     assert sum(solve.values()) + sum(figures.values()) == len(events) and sum(figures.values()) > 0
+    assert solve["soft"] >= result.solve.evaluations["gradient"]  # the solver's gradients are the evaluator's
 
 
 def test_a_cost_weight_makes_one_parameter_a_box_solve(monkeypatch):
@@ -183,3 +186,48 @@ def test_a_distributed_run_is_joined_first(monkeypatch, distributed, kwargs):
     with pytest.raises(Joined) as joined:
         ds.optimise(ds.Problem(), distributed=distributed)
     assert joined.value.args[0] == (distributed if kwargs is None else kwargs)
+
+
+def test_the_objective_of_a_problem_is_its_scenes_from_the_seeds_first_key_in_float64():
+    from diffsense.metrics import speed_shifted_scenes
+    from diffsense.sensors._mount import relevance_stand_ins
+
+    toy = ToyPredictor(jnp.asarray(TOY_GAIN))
+    problem = ds.Problem(scenarios=["sc01"], variants=2, seed=3, prediction_stride_frames=40, predictor=toy)
+    E = ds.objective(problem)
+    assert E.dtype == jnp.float64 and E.scenario_names == ("sc01",)
+    scenes_key = jax.random.split(jax.random.PRNGKey(3))[0]  # [1] draws the sensors' noise
+    expected = speed_shifted_scenes(("sc01",), 2, scenes_key, spec=toy.spec,  # variant 1 is randomised
+                                    sensors=[problem.make_sensor(), *relevance_stand_ins(problem.params)],
+                                    stride_frames=40, dtype=jnp.float64)[0].base
+    np.testing.assert_array_equal(np.asarray(E.data.scenes.x_m), np.asarray(expected.x_m))
+
+
+def test_float64_switches_jax_to_64_bits_in_a_fresh_process():
+    import os
+    import subprocess
+    import sys
+
+    code = ("import jax; from diffsense._optimise import _precision; "
+            "print(jax.config.jax_enable_x64, _precision(False).__name__, jax.config.jax_enable_x64, "
+            "_precision(True).__name__, jax.config.jax_enable_x64)")
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    assert out.split() == ["False", "float32", "False", "float64", "True"]
+
+
+def test_under_a_probabilistic_law_the_near_optimal_set_is_judged_on_e_ref():
+    from tests.test_reference import SWERLING
+
+    problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0),
+                         sensor_config="configs/sensors/laws/radar_swerling1.toml",
+                         estimator=ds.metrics.EstimatorConfig(reference_draws=4),
+                         solve=SolveConfig(max_evaluations=9), scenarios=["sc01"])
+    scenes, scenario = toy_scenes(1)
+    frames = prediction_frames(scenes.num_frames)[:3]
+    E = make_objective(scenes, scenario, frames, SWERLING, ToyPredictor(jnp.asarray(TOY_GAIN)), names=(H,), shard=False,
+                       estimator=problem.estimator)
+    result = ds.optimise(problem, E=E, figures=False)
+    assert result.reference["answer_on"] == "E_ref"
+    # the tolerance is 0.5 % of the best E_ref evaluated, which is r*'s (the answer is chosen on it)
+    assert result.near_optimal["tolerance_m"] == pytest.approx(0.005 * result.reference["E_ref_star"], rel=1e-12)
