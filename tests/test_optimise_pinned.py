@@ -22,7 +22,12 @@ from diffsense.predictors import CastPredictor, init_predictor
 from diffsense.sensors import make_sensor
 from diffsense.solve import SolveConfig
 from diffsense.tracks import prediction_frames
-from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
+from tests._toy_pipeline import (
+    TOY_GAIN,
+    ToyPredictor,
+    ValidatedToyPredictor,
+    toy_scenes,
+)
 
 H = "hfov_deg"
 
@@ -76,12 +81,6 @@ def test_the_predictor_computes_in_the_precision_asked_for():
     assert recast.inner is cs_lstm and recast.dtype == "float32"  # never two casts deep
 
 
-class _ValidatedToy(ToyPredictor):
-    """The toy predictor with a validation RMSE so small that every scene lies outside its domain."""
-
-    validation_rmse_m: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
-
-
 def _toy_objective(problem, predictor):
     scenes, scenario = toy_scenes(1)
     frames = prediction_frames(scenes.num_frames)[:3]
@@ -92,7 +91,7 @@ def _toy_objective(problem, predictor):
 def solved():
     problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0), dense_check=40.0, extra_curve_points=4,
                          solve=SolveConfig(max_evaluations=9), scenarios=["sc01"])
-    E = _toy_objective(problem, _ValidatedToy(jnp.asarray(TOY_GAIN)))
+    E = _toy_objective(problem, ValidatedToyPredictor(jnp.asarray(TOY_GAIN)))
     lines, events = [], []
     result = ds.optimise(problem, E=E, progress=lines.append, on_evaluation=events.append)
     return problem, result, lines, events

@@ -26,7 +26,12 @@ from diffsense.errors import InputError
 from diffsense.metrics import make_objective
 from diffsense.solve import BoxConfig
 from diffsense.tracks import prediction_frames
-from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
+from tests._toy_pipeline import (
+    TOY_GAIN,
+    ToyPredictor,
+    ValidatedToyPredictor,
+    toy_scenes,
+)
 from tests.test_result_pinned import _box
 
 PARAMS = {"radar.range_m": (30.0, 200.0), "camera.width_px": (640.0, 3840.0)}
@@ -99,12 +104,6 @@ def test_pareto_json(judged_on):
                                  "source": d.source, "evaluations": d.counts}
 
 
-class _ValidatedToy(ToyPredictor):
-    """The toy predictor with a validation RMSE so small that every scene lies outside its domain."""
-
-    validation_rmse_m: tuple[float, ...] = (0.01, 0.02, 0.03, 0.04, 0.05)
-
-
 def _toy_objective(problem, predictor=None):
     scenes, scenario = toy_scenes(1)
     frames = prediction_frames(scenes.num_frames)[:3]
@@ -133,7 +132,7 @@ def boxed():
     problem = _problem(box=BoxConfig(samples=4, starts=1, tau_schedule=(2.0, 1.0), max_steps=3, max_soft=6,
                                       bound_tol=0.02),
                        cost_weight=1.0, scenarios=["sc01"])
-    E = _toy_objective(problem, _ValidatedToy(jax.numpy.asarray(TOY_GAIN)))
+    E = _toy_objective(problem, ValidatedToyPredictor(jax.numpy.asarray(TOY_GAIN)))
     lines, events = [], []
     return problem, ds.optimise(problem, E=E, progress=lines.append, on_evaluation=events.append), lines, events
 
