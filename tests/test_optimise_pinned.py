@@ -216,17 +216,15 @@ def test_float64_switches_jax_to_64_bits_in_a_fresh_process():
 
 
 def test_under_a_probabilistic_law_the_near_optimal_set_is_judged_on_e_ref():
-    from tests.test_reference import SWERLING
+    from tests.test_reference import radar_objective
+
+    # radar_objective: the Swerling I radar on one toy scene, three instants
 
     problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0),
                          sensor_config="configs/sensors/laws/radar_swerling1.toml",
                          estimator=ds.metrics.EstimatorConfig(reference_draws=4),
                          solve=SolveConfig(max_evaluations=9), scenarios=["sc01"])
-    scenes, scenario = toy_scenes(1)
-    frames = prediction_frames(scenes.num_frames)[:3]
-    E = make_objective(scenes, scenario, frames, SWERLING, ToyPredictor(jnp.asarray(TOY_GAIN)), names=(H,), shard=False,
-                       estimator=problem.estimator)
-    result = ds.optimise(problem, E=E, figures=False)
+    result = ds.optimise(problem, E=radar_objective(kind="auto", draws=4), figures=False)
     assert result.reference["answer_on"] == "E_ref"
     # the tolerance is 0.5 % of the best E_ref evaluated, which is r*'s (the answer is chosen on it)
     assert result.near_optimal["tolerance_m"] == pytest.approx(0.005 * result.reference["E_ref_star"], rel=1e-12)
