@@ -132,3 +132,16 @@ def test_implicit_derivative_matches_re_solved_optima(setup):
     np.testing.assert_allclose(ift, fd, rtol=0.05)
     on_bound = ds.sensitivity(problem, _result(r_star, on_bound=True), ["traffic_speed_kmh"], E=E)
     assert on_bound["traffic_speed_kmh"]["range_m"] == 0.0
+
+
+def test_sensitivity_to_the_speed_is_the_implicit_function_theorems(setup):
+    """-(d2E^2/dr dtheta) / (d2E^2/dr2) at the reported r*, the curvature by central differences
+    of dE^2/dr (the slow test below checks it against re-solved optima)."""
+    problem, E, f = setup
+    h = 1e-4
+    curvature = (float(f(R_M + h, 0.0)[1]) - float(f(R_M - h, 0.0)[1])) / (2 * h)
+    assert curvature > 0
+    got = ds.sensitivity(problem, _result(R_M), ["traffic_speed_kmh"], E=E)
+    assert list(got) == ["traffic_speed_kmh"]
+    np.testing.assert_allclose(got["traffic_speed_kmh"]["range_m"], -float(f(R_M, 0.0)[3]) / curvature, rtol=1e-5)
+    assert ds.sensitivity(problem, _result(R_M), ["traffic_speed_kmh"]) == got  # E built from the problem

@@ -1,0 +1,143 @@
+"""`diffsense.sensitivity` pinned: which r and temperature it differentiates at, when it answers 0
+or None, and its refusals by whole message.
+
+The expected values are -(d2E^2/dr drain) / (d2E^2/dr2) from float64 central differences of E^2
+itself (not through `argmin_derivative`), on test_sensitivity's rainy toy objective at points
+where the candidates (the last level's r or the reported r*, the last temperature or the first)
+give clearly different answers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import diffsense as ds
+from diffsense._sensitivity import (
+    ODD_PARAMETERS,
+    WEATHER_PARAMETERS,
+    check_theta,
+    odd_shift,
+)
+from diffsense.solve import LevelResult
+from tests.test_sensitivity import RAIN, RainyToy, _objective, _result
+
+H = 1e-3  # [m] and [mm/h]: float64 differences of E^2 ~ 1e2 keep 1e-7 of the curvatures below
+
+
+@pytest.fixture(scope="module")
+def setup():
+    jax.config.update("jax_enable_x64", True)
+    E = _objective(RAIN)
+    problem = ds.Problem(sensor=RainyToy(), params={"range_m": (10.0, 120.0)})
+
+    @jax.jit
+    def e2(r, rain, tau):
+        moved = eqx.tree_at(lambda o: o.weather.rain_mm_h, E, E.weather.rain_mm_h + (rain - RAIN))
+        return moved.e2({"range_m": r}, tau)
+
+    return problem, E, e2
+
+
+def _by_differences(e2, r: float, tau: float) -> float:
+    curvature = (e2(r + H, RAIN, tau) - 2 * e2(r, RAIN, tau) + e2(r - H, RAIN, tau)) / H**2
+    cross = (e2(r + H, RAIN + H, tau) - e2(r + H, RAIN - H, tau) - e2(r - H, RAIN + H, tau)
+             + e2(r - H, RAIN - H, tau)) / (4 * H * H)
+    assert curvature > 0
+    return float(-cross / curvature)
+
+
+def _with(result: ds.Result, *, taus=(), levels=(), on_bound=False) -> ds.Result:
+    solve = dataclasses.replace(result.solve, tau_schedule=taus, levels=levels, on_bound=on_bound)
+    return dataclasses.replace(result, solve=solve)
+
+
+def _level(tau: float, r: float, bound: int = 0) -> LevelResult:
+    return LevelResult(tau=tau, r=r, gradient_evaluations=7, bound=bound, converged=True)
+
+
+def test_at_the_last_levels_r_and_the_last_temperature(setup):
+    """Reported r* 45 m; last level r 40 m at tau 4 (the first, tau 1, was at 30 m)."""
+    problem, E, e2 = setup
+    result = _with(_result(45.0), taus=(1.0, 4.0), levels=(_level(1.0, 30.0), _level(4.0, 40.0)))
+    got = ds.sensitivity(problem, result, ["rain_mm_h", "fog_visibility_m"], E=E)
+    assert list(got) == ["rain_mm_h", "fog_visibility_m"]
+    assert list(got["rain_mm_h"]) == ["range_m"]
+    expected = _by_differences(e2, 40.0, 4.0)
+    np.testing.assert_allclose(expected, 0.5086, atol=1e-3)  # the other candidates: 0.39, 0.70, 0.56
+    np.testing.assert_allclose(got["rain_mm_h"]["range_m"], expected, rtol=1e-4)
+    assert got["fog_visibility_m"] == {"range_m": 0.0}  # this sensor ignores fog
+    assert isinstance(got["rain_mm_h"]["range_m"], float)
+
+
+def test_without_levels_at_the_reported_r_star_and_temperature_1(setup):
+    problem, E, e2 = setup
+    got = ds.sensitivity(problem, _with(_result(45.0)), ["rain_mm_h"], E=E)
+    expected = _by_differences(e2, 45.0, 1.0)
+    np.testing.assert_allclose(expected, 0.6513, atol=1e-3)
+    np.testing.assert_allclose(got["rain_mm_h"]["range_m"], expected, rtol=1e-4)
+    at_half = ds.sensitivity(problem, _with(_result(45.0), taus=(0.5,)), ["rain_mm_h"], E=E)
+    np.testing.assert_allclose(at_half["rain_mm_h"]["range_m"], _by_differences(e2, 45.0, 0.5), rtol=1e-4)
+
+
+@pytest.mark.parametrize("bound", [-1, 1])
+def test_a_last_level_on_its_brackets_edge_is_held(setup, bound):
+    problem, E, _ = setup
+    result = _with(_result(45.0), taus=(1.0,), levels=(_level(1.0, 45.0, bound),))
+    assert ds.sensitivity(problem, result, ["rain_mm_h"], E=E) == {"rain_mm_h": {"range_m": 0.0}}
+    inside = _with(_result(45.0), taus=(1.0,), levels=(_level(1.0, 45.0, bound), _level(1.0, 45.0)))
+    assert ds.sensitivity(problem, inside, ["rain_mm_h"], E=E)["rain_mm_h"]["range_m"] > 0.5
+
+
+def test_on_a_bound_of_the_interval_is_held(setup):
+    problem, E, _ = setup
+    result = _with(_result(45.0), taus=(1.0,), levels=(_level(1.0, 45.0),), on_bound=True)
+    assert ds.sensitivity(problem, result, ["rain_mm_h"], E=E) == {"rain_mm_h": {"range_m": 0.0}}
+
+
+def test_none_where_the_soft_objective_is_concave(setup):
+    """At 20 m and tau 0.5 d2E^2/dr2 < 0: no strict minimum, so no derivative (fog's too)."""
+    problem, E, e2 = setup
+    assert e2(20.0 + H, RAIN, 0.5) - 2 * e2(20.0, RAIN, 0.5) + e2(20.0 - H, RAIN, 0.5) < 0
+    result = _with(_result(45.0), taus=(0.5,), levels=(_level(0.5, 20.0),))
+    assert ds.sensitivity(problem, result, ["rain_mm_h", "fog_visibility_m"], E=E) == {
+        "rain_mm_h": {"range_m": None}, "fog_visibility_m": {"range_m": None}}
+
+
+def test_odd_shift_moves_every_variants_weather_by_the_shift(setup):
+    problem, E, _ = setup
+    for theta in WEATHER_PARAMETERS:
+        moved = odd_shift(problem, E, theta)(jnp.asarray(2.5))
+        np.testing.assert_array_equal(getattr(moved.weather, theta), getattr(E.weather, theta) + 2.5)
+        other, = (t for t in WEATHER_PARAMETERS if t != theta)
+        np.testing.assert_array_equal(getattr(moved.weather, other), getattr(E.weather, other))
+    assert ODD_PARAMETERS == ("rain_mm_h", "fog_visibility_m", "traffic_speed_kmh")
+
+
+def test_refusals_by_whole_message(setup, tmp_path):
+    problem, E, _ = setup
+    (tmp_path / "r.csv").touch()
+    with pytest.raises(ds.InputError) as err:
+        check_theta(problem, ["rain_mm_h", "snow_cm", "hail"])
+    assert str(err.value) == ("no sensitivity to 'snow_cm': the differentiable ODD parameters are "
+                              "rain_mm_h, fog_visibility_m, traffic_speed_kmh")
+    with pytest.raises(ds.InputError, match="^no sensitivity to 'hail'"):
+        odd_shift(problem, E, "hail")
+    recorded = dataclasses.replace(problem, scenes=f"highd:{tmp_path / 'r.csv'}")
+    check_theta(recorded, list(WEATHER_PARAMETERS))
+    with pytest.raises(ds.InputError) as err:
+        check_theta(recorded, ["rain_mm_h", "traffic_speed_kmh"])
+    assert str(err.value) == (f"no sensitivity to traffic_speed_kmh for recorded scenes (highd:{tmp_path / 'r.csv'}): "
+                              "they move at the speeds they were recorded at")
+    check_theta(problem, list(ODD_PARAMETERS))
+    two = dataclasses.replace(_result(45.0), r_star={"range_m": 45.0, "gain": 1.0})
+    with pytest.raises(ds.InputError) as err:
+        ds.sensitivity(problem, two, ["rain_mm_h"], E=E)
+    assert str(err.value) == "sensitivity is implemented for one-parameter problems"
+    with pytest.raises(ds.InputError, match="^no sensitivity to 'snow_cm'"):
+        ds.sensitivity(problem, two, ["snow_cm"], E=E)  # theta is checked first
