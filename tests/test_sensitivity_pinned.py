@@ -24,7 +24,11 @@ from diffsense._sensitivity import (
     check_theta,
     odd_shift,
 )
+from diffsense.metrics import make_objective
+from diffsense.sensors import Weather
 from diffsense.solve import LevelResult
+from diffsense.tracks import prediction_frames
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
 from tests.test_sensitivity import RAIN, RainyToy, _objective, _result
 
 H = 1e-3  # [m] and [mm/h]: float64 differences of E^2 ~ 1e2 keep 1e-7 of the curvatures below
@@ -141,3 +145,28 @@ def test_refusals_by_whole_message(setup, tmp_path):
     assert str(err.value) == "sensitivity is implemented for one-parameter problems"
     with pytest.raises(ds.InputError, match="^no sensitivity to 'snow_cm'"):
         ds.sensitivity(problem, two, ["snow_cm"], E=E)  # theta is checked first
+
+
+def test_in_the_objectives_precision(setup):
+    """A float32 objective beside 64-bit JAX: r* enters as float32, so the answer is a float32
+    number (a float64 r* would promote the derivative's program to float64)."""
+    problem, _, _ = setup
+    scenes, scenario = toy_scenes(3)
+    scenes = jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a, scenes)
+    E32 = make_objective(scenes, scenario, prediction_frames(scenes.num_frames), RainyToy(),
+                         ToyPredictor(jnp.asarray(TOY_GAIN, jnp.float32)), names=("range_m",),
+                         weather=Weather(rain_mm_h=RAIN))
+    assert E32.dtype == jnp.float32
+    got = ds.sensitivity(problem, _with(_result(45.0)), ["rain_mm_h"], E=E32)["rain_mm_h"]["range_m"]
+    assert float(np.float32(got)) == got
+
+    @jax.jit
+    def e2(r, rain):  # float32 differences: a wider step keeps rounding to ~1e-3 of the curvature
+        moved = eqx.tree_at(lambda o: o.weather.rain_mm_h, E32, E32.weather.rain_mm_h + (rain - RAIN))
+        return moved.e2({"range_m": r}, 1.0)
+
+    h = np.float32(0.05)
+    r, rain = np.float32(45.0), np.float32(RAIN)
+    curvature = (e2(r + h, rain) - 2 * e2(r, rain) + e2(r - h, rain)) / h**2
+    cross = (e2(r + h, rain + h) - e2(r + h, rain - h) - e2(r - h, rain + h) + e2(r - h, rain - h)) / (4 * h * h)
+    np.testing.assert_allclose(got, -float(cross) / float(curvature), rtol=1e-2)

@@ -12,6 +12,7 @@ import dataclasses
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -19,7 +20,7 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense._sensitivity import odd_shift
+from diffsense._sensitivity import _speed_scenes, odd_shift
 from diffsense.scene import load_scenario, simulate_scenario
 from diffsense.scene._scenario_config import Range
 from tests._recorded_files import write_highd
@@ -145,3 +146,11 @@ def test_sensitivity_to_the_speed_is_the_implicit_function_theorems(setup):
     assert list(got) == ["traffic_speed_kmh"]
     np.testing.assert_allclose(got["traffic_speed_kmh"]["range_m"], -float(f(R_M, 0.0)[3]) / curvature, rtol=1e-5)
     assert ds.sensitivity(problem, _result(R_M), ["traffic_speed_kmh"]) == got  # E built from the problem
+
+
+def test_the_re_simulated_scenes_are_in_the_objectives_precision(setup):
+    problem, E, _ = setup
+    float32_objective = SimpleNamespace(spec=E.spec, sensor=E.sensor, dtype=jnp.float32)
+    scenes = _speed_scenes(problem, float32_objective)(jnp.float32(0.0))
+    assert scenes.x_m.dtype == jnp.float32 and E.data.scenes.x_m.dtype == jnp.float64
+    np.testing.assert_allclose(scenes.x_m, E.data.scenes.x_m, rtol=0, atol=1e-3)
