@@ -10,7 +10,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense import _distributed
 from diffsense._distributed import initialize, is_writer, to_host
 from diffsense.errors import InputError
 
