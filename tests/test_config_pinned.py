@@ -232,3 +232,60 @@ def test_layers_name_the_file_a_refusal_came_from(tmp_path, monkeypatch):
         load_default(_Two, "bad.toml")
     assert str(err.value) == "configs/bad.toml: a: expected an integer, got 'x'"
     assert load_default(_Two, "one.toml") == _Two(a=1, b=2.0)
+
+
+def test_the_shipped_folder_is_the_installed_package_else_the_checkouts(tmp_path, monkeypatch):
+    from diffsense.config import _defaults
+
+    def files(name):
+        if name != "diffsense._configs":
+            raise ModuleNotFoundError(name)
+        return tmp_path
+
+    monkeypatch.setattr(_defaults.importlib.resources, "files", files)
+    assert _defaults._configs_root() == tmp_path
+    monkeypatch.setattr(_defaults.importlib.resources, "files", lambda name: tmp_path / "not a folder")
+    assert _defaults._configs_root() == ROOT / "configs"
+
+    def missing(name):
+        raise ModuleNotFoundError(name)
+
+    monkeypatch.setattr(_defaults.importlib.resources, "files", missing)
+    assert _defaults._configs_root() == ROOT / "configs"
+
+
+class _OneSegment:
+    """A resource folder that takes one name at a time, as importlib's Traversable promises."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def __truediv__(self, name: str) -> _OneSegment:
+        assert "/" not in name, name
+        return _OneSegment(self.path / name)
+
+    def read_text(self) -> str:
+        return self.path.read_text()
+
+
+def test_a_shipped_path_is_walked_one_folder_at_a_time(monkeypatch):
+    from diffsense.config import _defaults
+
+    monkeypatch.setattr(_defaults, "_configs_root", lambda: _OneSegment(ROOT / "configs"))
+    assert default_text("sensors/radar.toml") == (ROOT / "configs" / "sensors" / "radar.toml").read_text()
+
+
+def test_malformed_files_are_named_once(tmp_path, monkeypatch):
+    from diffsense.config import _defaults
+
+    monkeypatch.setattr(_defaults, "default_text", lambda rel: "a = [\n")
+    with pytest.raises(InputError) as err:
+        load_default(_Two, "broken.toml")
+    assert str(err.value).startswith("configs/broken.toml: malformed TOML: ")
+    user = tmp_path / "mine.toml"
+    user.write_text("b = [\n")
+    monkeypatch.setattr(_defaults, "default_text", lambda rel: "a = 1\n")
+    with pytest.raises(InputError) as err:
+        load_layers(_Two, ["one.toml"], user)
+    assert str(err.value).startswith(f"{user}: malformed TOML: ")
+    assert _convert(2, None | float, "o") == 2.0  # None first in the union: the other types still tried

@@ -76,7 +76,8 @@ def load_layers(cls: type[C], shipped: list[str], user: str | Path | None = None
 
 def load_default(cls: type[C], relpath: str) -> C:
     """Load a shipped config into the dataclass `cls`."""
+    data = parse_toml(default_text(relpath), f"configs/{relpath}")  # its refusal names the file itself
     try:
-        return from_dict(cls, parse_toml(default_text(relpath), f"configs/{relpath}"))
+        return from_dict(cls, data)
     except InputError as e:
         raise InputError(f"configs/{relpath}: {e}") from None
