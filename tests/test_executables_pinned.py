@@ -10,6 +10,7 @@ import hashlib
 import importlib.metadata
 import os
 import platform
+import time
 from pathlib import Path
 
 import equinox as eqx
@@ -26,8 +27,10 @@ from diffsense._executables import call, keep_in
 from tests.test_executables import _bowl, _files, _Holder
 
 _events: list[tuple[str, str]] = []
+_load_s: list[float] = []
 monitoring.register_event_duration_secs_listener(
-    lambda event, _d, **kw: _events.append((event, kw.get("fun_name", "")))
+    lambda event, duration, **kw: (_events.append((event, kw.get("fun_name", ""))), _load_s.append(duration)
+                                   if event == ex.LOAD_EVENT else None)
     if event.endswith("jaxpr_trace_duration") or event == ex.LOAD_EVENT else None)
 
 
@@ -182,8 +185,12 @@ def test_loading_is_an_event_and_memory_is_asked_first(folder, monkeypatch):
     keep_in(str(folder))  # a new process's memory; a string names the folder too
     assert ex._folder == folder and ex._memory == {}
     _events.clear()
+    _load_s.clear()
+    start = time.perf_counter()
     first = call(_bowl, x, 1.0)[0]
+    wall_s = time.perf_counter() - start
     assert [e for e, _ in _events if e == ex.LOAD_EVENT] == [ex.LOAD_EVENT]
+    assert len(_load_s) == 1 and 0.0 <= _load_s[0] <= wall_s  # the load's own duration
     assert ex.LOAD_EVENT == "/diffsense/executables/load_duration"
     monkeypatch.setattr(ex, "_load", lambda *a: pytest.fail("loaded again"))
     assert float(call(_bowl, x, 1.0)[0]) == float(first)
@@ -207,3 +214,43 @@ def test_the_library_jit_is_made_once_per_function():
     assert ex._filter_jit(f) is ex._filter_jit(f)
     assert isinstance(ex._filter_jit(f), type(eqx.filter_jit(f)))
     assert float(ex._filter_jit(f)(jnp.asarray(1.0))) == 2.0
+
+
+def test_a_folder_is_made_with_its_parents(tmp_path):
+    keep_in(tmp_path / "a" / "b" / "executables")
+    try:
+        call(_bowl, jnp.arange(3.0), 2.0)
+    finally:
+        keep_in(None)
+    assert len(_files(tmp_path / "a" / "b" / "executables")) == 1
+
+
+@pytest.mark.parametrize("unlink_fails", [False, True])
+def test_a_failed_write_leaves_nothing_and_keeps_the_program(folder, monkeypatch, unlink_fails):
+    def refuse(src, dst):
+        raise OSError("disk full")
+
+    def cannot_unlink(self, missing_ok=False):
+        raise PermissionError("read-only")
+
+    monkeypatch.setattr(ex.os, "replace", refuse)
+    if unlink_fails:
+        monkeypatch.setattr(Path, "unlink", cannot_unlink)
+    value = call(_bowl, jnp.arange(3.0), 2.0)[0]
+    monkeypatch.undo()
+    np.testing.assert_allclose(float(value), 2.0 * np.sum((np.arange(3.0) - 0.3) ** 2), rtol=1e-12)
+    assert len(ex._memory) == 1  # compiled for the folder, kept for this process
+    leftovers = sorted(p.name for p in folder.iterdir())
+    assert leftovers == ([] if not unlink_fails else [n for n in leftovers if n.endswith(".tmp")])
+    _events.clear()
+    call(_bowl, jnp.arange(3.0), 2.0)
+    assert not _events  # neither traced nor loaded again
+
+
+def test_a_program_with_a_host_callback_keeps_it(folder):
+    """XLA needs the host callbacks at compile time: without them such a program crashes."""
+    def with_callback(x):
+        return 2.0 * jax.pure_callback(np.sin, jax.ShapeDtypeStruct(x.shape, x.dtype), x)
+
+    value = call(with_callback, jnp.arange(3.0))
+    np.testing.assert_allclose(np.asarray(value), 2.0 * np.sin(np.arange(3.0)), rtol=1e-12)
