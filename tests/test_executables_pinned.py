@@ -254,3 +254,11 @@ def test_a_program_with_a_host_callback_keeps_it(folder):
 
     value = call(with_callback, jnp.arange(3.0))
     np.testing.assert_allclose(np.asarray(value), 2.0 * np.sin(np.arange(3.0)), rtol=1e-12)
+
+
+def test_a_numpy_argument_shares_the_program_of_a_strong_jax_array(folder):
+    """numpy arrays have no weak type: they are keyed as strong, as JAX traces them."""
+    value = call(_bowl, np.arange(3.0), 2.0)[0]
+    np.testing.assert_allclose(float(value), 2.0 * np.sum((np.arange(3.0) - 0.3) ** 2), rtol=1e-12)
+    call(_bowl, jnp.arange(3.0), 2.0)
+    assert len(_files(folder)) == 1
