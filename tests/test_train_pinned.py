@@ -77,12 +77,13 @@ def test_the_caps_hold_the_value_and_stop_the_gradient(column, cap):
 
 
 def test_class_bce_is_torchs_bce_of_softmax_probabilities():
-    logits = np.array([[2.0, -1.0, 0.5], [0.0, 0.0, 0.0], [-3.0, 4.0, 1.0]])
-    label = np.array([0, 2, 1])
+    logits = np.array([[2.0, -1.0, 0.5], [0.0, 0.0, 0.0], [-3.0, 4.0, 1.0], [1.0, 1.5, -0.5]])  # B 4, C 3
+    label = np.array([0, 2, 1, 1])
     p = np.exp(logits) / np.exp(logits).sum(axis=1, keepdims=True)
     onehot = np.eye(3)[label]
     by_hand = -np.mean(onehot * np.log(p) + (1 - onehot) * np.log(1 - p))
     np.testing.assert_allclose(float(class_bce(jnp.asarray(logits), jnp.asarray(label))), by_hand, rtol=1e-12)
+    assert class_bce(jnp.asarray(logits, jnp.float32), jnp.asarray(label)).dtype == jnp.float32  # the logits' own
     two = np.array([[1.0, -1.0]])
     q = 1.0 / (1.0 + np.exp(-2.0))  # softmax of two logits 2 apart
     np.testing.assert_allclose(float(class_bce(jnp.asarray(two), jnp.asarray([1]))), -np.log(1 - q), rtol=1e-12)
@@ -90,16 +91,18 @@ def test_class_bce_is_torchs_bce_of_softmax_probabilities():
 
 def test_rmse_is_taken_at_each_whole_second():
     assert DT_S == 0.2 and list(SECOND_INDEX) == [4, 9, 14, 19, 24]
-    fut = np.zeros((2, 25, 2))
+    fut = np.full((2, 25, 2), 10.0)
     pred = fut.copy()
-    pred[:, 3] = 7.0  # 0.8 s: not a whole second
-    pred[0, 9] = [3.0, 4.0]  # 2 s, one of two samples: sqrt(25 / 2)
-    pred[:, 24, 1] = 2.0  # 5 s, both samples, lateral only
+    pred[:, 3] += 7.0  # 0.8 s: not a whole second
+    pred[0, 9] += [3.0, 4.0]  # 2 s, one of two samples: sqrt(25 / 2)
+    pred[:, 24, 1] -= 2.0  # 5 s, both samples, lateral only
     np.testing.assert_allclose(rmse_per_second(pred, fut), [0.0, np.sqrt(12.5), 0.0, 0.0, 2.0], rtol=1e-15)
     by_axis = rmse_per_second_by_axis(pred, fut)
     assert by_axis == {"lon": [0.0, round(np.sqrt(4.5), 4), 0.0, 0.0, 0.0],
                        "lat": [0.0, round(np.sqrt(8.0), 4), 0.0, 0.0, 2.0]}
     assert rmse_per_second_by_axis(fut + 1.0 / 3.0, fut)["lon"] == [0.3333] * 5
+    small = np.float32(0.1) * np.ones((1, 25, 2), np.float32)  # float32 in, squared in float64
+    np.testing.assert_array_equal(rmse_per_second(small, 0 * small), np.full(5, np.sqrt(2 * float(small[0, 0, 0]) ** 2)))
 
 
 def test_constant_velocity_from_the_last_points():
@@ -110,6 +113,9 @@ def test_constant_velocity_from_the_last_points():
     three = constant_velocity_m(hist, 3)  # (2, 0.5) m in 0.4 s
     np.testing.assert_allclose(three[0, 4], [2.0 + 5.0, 0.5 + 1.25], rtol=1e-12)
     assert two.shape == (1, 25, 2)
+    thirds = constant_velocity_m(np.asarray(hist / 3.0, np.float32), 2)  # float32 in, float64 out
+    assert thirds.dtype == np.float64
+    np.testing.assert_array_equal(thirds, constant_velocity_m(np.asarray(hist / 3.0, np.float32).astype(np.float64), 2))
 
 
 @pytest.mark.parametrize(("cls", "field", "value", "message"), [
@@ -150,6 +156,7 @@ def test_config_edges_and_defaults_that_are_accepted():
     with pytest.raises(InputError):
         OptimConfig(mse_epochs=0, nll_epochs=0)
     RunConfig(checkpoint_every_steps=1, val_batch_size=1)
+    OptimConfig(clip_grad_norm=0.5, learning_rate=1e-9, position_scale_ft=0.5)
     assert dataclasses.asdict(OptimConfig()) == {
         "learning_rate": 1e-3, "batch_size": 128, "clip_grad_norm": 10.0, "mse_epochs": 5, "nll_epochs": 3,
         "seed": 0, "position_scale_ft": 1.0, "lateral_scale_ft": 0.0, "mse_in_scaled_units": False,
