@@ -43,7 +43,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 # "core" is the package's top level: the modules directly under diffsense/ (name them with --files).
-PACKAGES = ("sensors", "tracks", "metrics", "solve", "predictors", "scene", "report", "config", "train", "core")
+PACKAGES = ("sensors", "tracks", "metrics", "solve", "predictors", "scene", "report", "config", "train", "cli", "core")
 
 
 # A mutant name pattern that matches no mutant: `mutmut run` with it generates the mutants and
