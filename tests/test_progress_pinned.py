@@ -26,6 +26,17 @@ class _Terminal(io.StringIO):
         return True
 
 
+class _Log(io.StringIO):
+    """A pipe's view: what was flushed by when."""
+
+    def __init__(self):
+        super().__init__()
+        self.flushed: list[str] = []
+
+    def flush(self) -> None:
+        self.flushed.append(self.getvalue())
+
+
 @pytest.fixture
 def clock(monkeypatch):
     c = _Clock()
@@ -98,6 +109,7 @@ def test_a_terminal_gets_one_bar_closed_by_the_next_stage(clock):
     _at(clock, progress, 1.0, _event("soft", 3, 10))
     bar = progress._bar
     assert bar is not None and bar.total == 10 and bar.n == 3  # starts at the events already done
+    assert "2/10 [" in out.getvalue() and "eval/s]" in out.getvalue()  # its first drawing, here
     _at(clock, progress, 2.0, _event("soft", 4, 12, cost=3.0))
     assert progress._bar is bar and bar.total == 12 and bar.n == 4
     assert "E soft = 1.2346 m, cost 3.00, ETA 8 s" in bar.postfix
@@ -115,3 +127,26 @@ def test_quiet_prints_neither_stages_nor_evaluations(clock):
     _at(clock, progress, 1.0, _event("soft", 1, 3))
     _at(clock, progress, 2.0, _event("soft", 2, 3))
     assert out.getvalue() == "" and progress._bar is None
+
+
+def test_every_line_is_flushed_as_it_is_written(clock):
+    out = _Log()
+    progress = Progress(quiet=False, stream=out)
+    progress("stage")
+    _at(clock, progress, 1.0, _event("soft", 1, 100))
+    _at(clock, progress, 3.0, _event("soft", 2, 100))  # the estimate, then the line
+    lines = out.getvalue().splitlines(keepends=True)
+    assert out.flushed == ["".join(lines[:n]) for n in range(1, 5)]
+
+
+def test_the_bar_draws_once_per_evaluation(clock, monkeypatch):
+    from tqdm import tqdm
+
+    refreshes = []
+    original = tqdm.set_postfix_str
+    monkeypatch.setattr(tqdm, "set_postfix_str", lambda self, s="", refresh=True: (refreshes.append(refresh),
+                                                                                   original(self, s, refresh)))
+    progress = Progress(quiet=False, stream=_Terminal())
+    _at(clock, progress, 1.0, _event("soft", 1, 10))
+    _at(clock, progress, 2.0, _event("soft", 2, 10))
+    assert refreshes == [False, False]  # the update that follows draws it
