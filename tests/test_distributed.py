@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,8 +26,9 @@ from diffsense.solve import Evaluator
 from tests._toy_pipeline import toy_objective
 ev = Evaluator(toy_objective(n=3))  # 3 variants over 2 processes: one padding row
 value, grad = ev.value_and_grad(42.0)
+rows = ev.hard(42.0).sq_error  # [N, F] split over the processes: gathered whole, in order
 print(json.dumps({"processes": jax.process_count(), "devices": len(jax.devices()), "e2": float(value),
-                  "grad": float(grad[0]), "hard": ev.e_hard(42.0)}))
+                  "grad": float(grad[0]), "hard": ev.e_hard(42.0), "rows": len(rows), "sq_error": rows[:3].tolist()}))
 """
 
 
@@ -60,6 +62,8 @@ def test_two_processes_match_one():
     for t in two:
         for key in ("e2", "grad", "hard"):
             assert t[key] == pytest.approx(single[key], rel=1e-6, abs=1e-9), key
+        assert t["rows"] == 4 and single["rows"] == 3  # one zero-weight padding row over 2 devices
+        np.testing.assert_allclose(t["sq_error"], single["sq_error"], rtol=1e-6, atol=1e-9)
 
 
 @pytest.mark.slow
