@@ -69,8 +69,15 @@ def problem_fields(settings: Settings, sensor: str | None = None, param: str | N
         interval = settings.intervals.get(sensor, {}).get(name)
         if interval is None:
             raise InputError(f"no interval for {sensor} {name}: give one (--interval LO HI, or [intervals.{sensor}])")
-    return dict(sensor=sensor, params={name: tuple(interval)}, scenarios=p.scenarios, variants=p.variants,
-                seed=p.seed, predictor=p.model, fill=p.fill or None, estimator=p.estimator,
-                profile=p.profile, sensor_config=p.sensor_config or None,
+    return dict(sensor=sensor, params={name: tuple(interval)}, **shared_fields(settings))
+
+
+def shared_fields(settings: Settings) -> dict[str, Any]:
+    """The `Problem` keyword arguments a config describes besides its sensor and parameter: what a
+    suite or a box of parameters, which name their own, takes from it."""
+    p = settings.problem
+    return dict(scenarios=p.scenarios, variants=p.variants, seed=p.seed, predictor=p.model, fill=p.fill or None,
+                estimator=p.estimator, profile=p.profile, sensor_config=p.sensor_config or None,
                 prediction_stride_frames=p.prediction_stride_frames, background_vehicles=p.background_vehicles,
-                float64=p.float64, predictor_dtype=p.predictor_dtype, objective=p.objective, miss_penalty_m2=p.miss_penalty_m2, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)
+                float64=p.float64, predictor_dtype=p.predictor_dtype, objective=p.objective,
+                miss_penalty_m2=p.miss_penalty_m2, solve=settings.solve, extra_curve_points=settings.plots.extra_curve_points)

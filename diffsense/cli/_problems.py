@@ -44,7 +44,7 @@ def _number_list(text: str, what: str) -> tuple[float, ...]:
 def problems(args: argparse.Namespace) -> list:
     """The `diffsense.Problem` of each sensor the flags ask for, every input checked."""
     from diffsense import Problem
-    from diffsense._settings import load_settings, problem_fields
+    from diffsense._settings import load_settings, problem_fields, shared_fields
     from diffsense._suite_file import checked
     from diffsense.solve import check_steps
 
@@ -64,10 +64,9 @@ def problems(args: argparse.Namespace) -> list:
     out = []
     for sensor in sensors:
         if boxes or isinstance(sensor, tuple):
-            fields = problem_fields(settings, "radar", None, (30.0, 180.0))  # every other key from the config
-            fields.update(sensor=sensor, params=boxes or {})
             if not boxes:
                 raise InputError("a suite needs its parameters as --param NAME=LO:HI (e.g. radar.hfov_deg=20:120)")
+            fields = dict(sensor=sensor, params=boxes, **shared_fields(settings))  # the config's param is not theirs
         else:
             fields = problem_fields(settings, sensor, single, tuple(args.interval) if args.interval else None)
         fields.update(_flag_fields(args, settings, suite))
