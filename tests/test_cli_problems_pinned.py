@@ -141,3 +141,42 @@ def test_pareto_weights():
         with pytest.raises(InputError) as err:
             weights(*argv)
         assert str(err.value) == message
+
+
+def test_a_config_fills_what_the_flags_leave(tmp_path):
+    config = tmp_path / "mine.toml"
+    config.write_text('[problem]\nvariants = 3\nsensor = "camera"\nparam = "width_px"\n'
+                      "[solve]\ntau_schedule = [8.0, 4.0, 2.0]\n")
+    (p,) = _problems("--config", str(config), "--tau", "0.5")
+    assert (p.sensor, p.params, p.variants) == ("camera", {"width_px": (640.0, 3840.0)}, 3)
+    assert p.solve.tau_schedule == (2.0, 1.0, 0.5)  # the config's continuation, ending at 0.5
+    (r,) = _problems("--config", str(config), "--sensor", "radar", "--param", "range", "--interval", "50", "150")
+    assert (r.sensor, r.params, r.variants) == ("radar", {"range_m": (50.0, 150.0)}, 3)
+    # A suite or a box names its own parameters: the config's camera-only one is not asked of them.
+    suite_path = ROOT / "configs" / "suites" / "radar_camera_d4.toml"
+    (s,) = _problems("--config", str(config), "--suite", str(suite_path))
+    assert s.sensor == ("radar", "camera") and s.variants == 3 and "radar.range_m" in s.params
+    (b,) = _problems("--config", str(config), "--sensor", "radar", "--param", "hfov_deg=40:100",
+                     "--param", "range_m=50:150")
+    assert b.sensor == "radar" and b.params == {"hfov_deg": (40.0, 100.0), "range_m": (50.0, 150.0)}
+    (single,) = _problems("--param", "range")
+    assert single.params == {"range_m": (30.0, 200.0)}  # the config's interval for the named parameter
+
+
+def test_sensor_constants_from_a_flag_or_a_suite(tmp_path):
+    laws = ROOT / "configs" / "sensors" / "laws" / "radar_swerling1.toml"
+    (p,) = _problems("--sensor-config", str(laws))
+    assert p.sensor_config == str(laws)
+    suite = tmp_path / "suite.toml"
+    suite.write_text(f'sensors = ["radar", "camera"]\n[params]\n"radar.hfov_deg" = [20.0, 120.0]\n'
+                     f'[sensor_config]\nradar = "{laws}"\n')
+    (s,) = _problems("--suite", str(suite))
+    assert s.sensor_config == {"radar": str(laws)}
+
+
+def test_a_suites_refusal_names_the_file(tmp_path):
+    suite = tmp_path / "suite.toml"
+    suite.write_text('sensors = ["radar", "camera"]\n[params]\n"camera.zoom" = [1.0, 2.0]\n')
+    assert _refusal("--suite", str(suite)).startswith(f"suite {suite}: unknown camera parameter 'zoom' (known: ")
+    assert _refusal("--steps", "30,x") == "--steps must be comma-separated numbers, got '30,x'"
+    assert _refusal("--param", "a=b=1:2", "--param", "c=0:1") == "--param 'a=b=1:2': LO and HI must be numbers"
