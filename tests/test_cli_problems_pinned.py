@@ -180,3 +180,4 @@ def test_a_suites_refusal_names_the_file(tmp_path):
     assert _refusal("--suite", str(suite)).startswith(f"suite {suite}: unknown camera parameter 'zoom' (known: ")
     assert _refusal("--steps", "30,x") == "--steps must be comma-separated numbers, got '30,x'"
     assert _refusal("--param", "a=b=1:2", "--param", "c=0:1") == "--param 'a=b=1:2': LO and HI must be numbers"
+    assert _refusal("--variants", "0") == "variants must be an integer in [1, 100000], got 0"  # no suite named
