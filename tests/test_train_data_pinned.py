@@ -65,11 +65,11 @@ def test_the_model_frame_is_feet_with_the_lateral_axis_to_the_right(dataset):
     np.testing.assert_array_equal(samples.fut_m, np.concatenate([a["fut"], b["fut"]]))
     np.testing.assert_allclose(samples.hist, _model(hist_m), rtol=1e-6)
     np.testing.assert_allclose(samples.fut, _model(samples.fut_m), rtol=1e-6)
-    assert samples.hist.dtype == samples.fut.dtype == samples.hist_m.dtype == np.float32
+    assert samples.hist.dtype == samples.fut.dtype == samples.hist_m.dtype == samples.fut_m.dtype == np.float32
     np.testing.assert_array_equal(samples.lat, [0, 1, 2, 0, 1])
     np.testing.assert_array_equal(samples.lon, [0, 1, 0, 0, 1])
     np.testing.assert_array_equal(samples.sim_id, [0, 0, 1, 2, 3])
-    assert samples.lat.dtype == np.int32 and samples.sim_id.dtype == np.int64
+    assert samples.lat.dtype == samples.lon.dtype == np.int32 and samples.sim_id.dtype == np.int64
 
 
 @pytest.mark.parametrize(("max_samples", "rows", "width"), [(2, 2, 2), (3, 3, 2), (4, 4, 3), (0, 5, 3), (9, 5, 3)])
@@ -78,6 +78,19 @@ def test_max_samples_reads_only_the_shards_it_needs(dataset, max_samples, rows, 
     samples, _ = load_samples(folder, max_samples=max_samples)
     assert len(samples) == rows and samples.nbr_slot.shape == (rows, width)
     assert all(len(getattr(samples, name)) == rows for name in ("fut", "nbr_hist", "lat", "lon", "sim_id", "fut_m"))
+
+
+def test_reading_stops_once_max_samples_are_read(tmp_path):
+    """Shards of 3, 0, 2 and 2 samples; the last one's first sample has 4 neighbours."""
+    shards = [_shard(3, [0], [1], [0, 0, 0], 0.0), _shard(0, [], [], [], 0.0), _shard(2, [1, 1], [2, 3], [1, 1], 0.0),
+              _shard(2, [0, 0, 0, 0], [4, 5, 6, 7], [2, 2], 0.0)]
+    for k, shard in enumerate(shards):
+        np.savez(tmp_path / f"{k}.npz", **shard)
+    meta = {"layout_version": LAYOUT_VERSION, "shards": [{"file": f"{k}.npz"} for k in range(4)]}
+    (tmp_path / "meta.json").write_text(json.dumps(meta))
+    assert load_samples(tmp_path, max_samples=4)[0].nbr_slot.shape == (4, 2)  # the last shard unread
+    assert load_samples(tmp_path, max_samples=6)[0].nbr_slot.shape == (6, 4)
+    np.testing.assert_array_equal(load_samples(tmp_path)[0].nbr_slot[3:5], [[-1, -1, -1, -1], [2, 3, -1, -1]])
 
 
 def test_a_dataset_without_neighbours_has_one_padding_column(tmp_path):
@@ -90,6 +103,10 @@ def test_a_dataset_without_neighbours_has_one_padding_column(tmp_path):
 
 def test_refusals_by_whole_message(tmp_path):
     (tmp_path / "meta.json").write_text(json.dumps({"layout_version": LAYOUT_VERSION, "shards": []}))
+    with pytest.raises(InputError) as err:
+        load_samples(tmp_path)
+    assert str(err.value) == f"{tmp_path}: the dataset holds no samples"
+    (tmp_path / "meta.json").write_text(json.dumps({"layout_version": LAYOUT_VERSION}))
     with pytest.raises(InputError) as err:
         load_samples(tmp_path)
     assert str(err.value) == f"{tmp_path}: the dataset holds no samples"
@@ -115,6 +132,8 @@ def test_the_split_keeps_simulations_whole(dataset):
     np.testing.assert_array_equal(again, split_by_simulation(samples, 0.5, seed=1)[1].sim_id)
     val_sims = np.sort(np.random.default_rng(1).permutation([0, 1, 2, 3])[:2])
     np.testing.assert_array_equal(np.unique(again), val_sims)  # a seeded permutation of the simulations
+    two = samples.take(np.flatnonzero(samples.sim_id <= 1))
+    assert len(np.unique(split_by_simulation(two, 0.5, seed=0)[1].sim_id)) == 1  # two simulations suffice
     one = samples.take(np.flatnonzero(samples.sim_id == 0))
     with pytest.raises(InputError) as err:
         split_by_simulation(one, 0.5, seed=0)
