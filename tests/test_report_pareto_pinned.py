@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from matplotlib.colors import to_hex
 
 from diffsense.report import _pareto
 from diffsense.report._pareto import pareto_table, plot_pareto, write_pareto
@@ -56,9 +57,23 @@ def test_what_the_figure_draws(drawn, tmp_path):
     texts = [(t.get_text(), t.xy, t.xyann) for t in ax.texts]
     assert texts == [("lambda = 0", (3.0, 4.0), (6, 6)), ("lambda = 0.01", (1.0, 6.0), (6, -12)),
                      ("lambda = 0.02", (2.0, 7.0), (6, 6)), ("lambda = 0.05", (0.5, 9.0), (6, -12))]
+    assert all(t.anncoords == "offset points" for t in ax.texts)
     assert (ax.get_xlabel(), ax.get_ylabel(), ax.get_title()) == ("cost [EUR]", "E_hard [m]", "the title")
+    # The cloud grey behind; the front joined, with markers; the dominated designs hollow, edged in red.
+    assert to_hex(cloud.get_facecolors()[0]) == "#bfbfbf" and cloud.get_zorder() == 1
+    assert (line.get_linestyle(), line.get_marker(), line.get_color(), line.get_zorder()) == ("-", "o", "C0", 3)
+    assert to_hex(dominated.get_edgecolors()[0]) == to_hex("C3") and dominated.get_zorder() == 3
     assert [t.get_text() for t in ax.get_legend().get_texts()] == [
         "evaluated (hard)", "front (non-dominated designs)", "dominated design"]
+
+
+def test_a_front_without_judged_on_is_judged_on_e_hard(drawn, tmp_path):
+    """pareto.json written before `judged_on` existed."""
+    content = _front().to_dict()
+    del content["judged_on"]
+    assert pareto_table(content).splitlines()[1].startswith("lambda  E_hard [m]  cost [EUR]")
+    plot_pareto(tmp_path / "p.png", content, "t")
+    assert drawn[0][0].axes[0].get_ylabel() == "E_hard [m]"
 
 
 def test_every_design_on_the_front_draws_no_hollow_points(drawn, tmp_path):
