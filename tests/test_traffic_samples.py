@@ -87,8 +87,48 @@ def test_target_history_and_future_in_the_road_frame(constructed):
     np.testing.assert_allclose(constructed.hist[0, :, 0], np.arange(-15, 1) * 2.0, atol=2e-3)  # 10 m/s at 5 Hz
     np.testing.assert_allclose(constructed.fut[0, :, 0], np.arange(1, 26) * 2.0, atol=2e-3)
     assert (constructed.hist[0, -1] == 0).all() and (constructed.hist[0, :, 1] == 0).all()
-    # The lane changer moves right: its future lateral offset reaches minus one lane width.
+    # The lane changer moves right: its future lateral offset reaches minus one lane width, along
+    # the constructed smoothstep, point by point (t = 4.2 ... 9 s).
+    u = np.clip((4.0 + 0.2 * np.arange(1, 26) - 5.0) / 3.0, 0.0, 1.0)
+    np.testing.assert_allclose(constructed.fut[5, :, 1], -u**3 * (10 - 15 * u + 6 * u**2) * LANE_W, atol=1e-3)
     np.testing.assert_allclose(constructed.fut[5, -1, 1], -LANE_W, atol=1e-3)
+
+
+def test_every_instant_reads_its_own_future():
+    """The constructed scene one second longer (everyone keeps going): instants at 4 s and 5 s; the
+    first is not at the recording's end, so a future window read one point late would show."""
+    traffic = constructed_traffic()
+    more = np.arange(1, 11, dtype=np.float32) * 0.1
+
+    def extend(a, step=None):
+        tail = a[-1:] if step is None else a[-1:] + more[:, None] * step
+        return jnp.concatenate([a, jnp.broadcast_to(tail, (10, a.shape[1]))])
+
+    longer = TrafficTrajectories(s_m=extend(traffic.s_m, traffic.speed_mps[-1]), d_m=extend(traffic.d_m),
+                                 speed_mps=extend(traffic.speed_mps), lane=extend(traffic.lane),
+                                 target_lane=extend(traffic.target_lane), vehicles=traffic.vehicles)
+    got = extract_samples(longer, LANE_W, 1.0, 1.0)  # rows: instant * 7 + vehicle
+    u = np.clip((4.0 + 0.2 * np.arange(1, 26) - 5.0) / 3.0, 0.0, 1.0)
+    np.testing.assert_allclose(np.asarray(got.fut[5, :, 1]), -u**3 * (10 - 15 * u + 6 * u**2) * LANE_W, atol=1e-3)
+    np.testing.assert_allclose(np.asarray(got.fut[7, :, 0]), np.arange(1, 26) * 2.0, atol=2e-3)
+
+
+def test_of_two_vehicles_in_one_cell_the_one_nearer_its_centre_is_kept():
+    """Target 0 and, in its lane, vehicles 12.5 m and 13.6 m ahead: both in cell round(x / 4.572)
+    + 6 = 9 (centre 13.716 m); vehicle 2, the nearer the centre, is kept though its index is higher."""
+    traffic = constructed_traffic()
+
+    def pick(a):  # three vehicles, all in lane 1
+        return a[:, [0, 3, 4]]
+
+    t = jnp.arange(91, dtype=jnp.float32) * 0.1
+    s = jnp.stack([100 + 10 * t, 112.5 + 10 * t, 113.6 + 10 * t], axis=1)
+    three = TrafficTrajectories(s_m=s, d_m=pick(traffic.d_m), speed_mps=pick(traffic.speed_mps), lane=pick(traffic.lane),
+                                target_lane=pick(traffic.target_lane),
+                                vehicles=jax.tree_util.tree_map(lambda a: a[:3] if jnp.ndim(a) else a, traffic.vehicles))
+    got = extract_samples(three, LANE_W, 0.0, 1.0)
+    assert np.nonzero(np.asarray(got.nbr_present[0]))[0].tolist() == [13 + 9]
+    np.testing.assert_allclose(np.asarray(got.nbr_hist[0, 13 + 9, -1]), (13.6, 0.0), atol=2e-3)
 
 
 def test_labels_of_the_constructed_scene(constructed):
