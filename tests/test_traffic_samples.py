@@ -125,7 +125,8 @@ def test_of_two_vehicles_in_one_cell_the_one_nearer_its_centre_is_kept():
     s = jnp.stack([100 + 10 * t, 112.5 + 10 * t, 113.6 + 10 * t], axis=1)
     three = TrafficTrajectories(s_m=s, d_m=pick(traffic.d_m), speed_mps=pick(traffic.speed_mps), lane=pick(traffic.lane),
                                 target_lane=pick(traffic.target_lane),
-                                vehicles=jax.tree_util.tree_map(lambda a: a[:3] if jnp.ndim(a) else a, traffic.vehicles))
+                                vehicles=jax.tree_util.tree_map(lambda a: a[:3] if jnp.ndim(a) else a,
+                                                                   traffic.vehicles))  # all alike
     got = extract_samples(three, LANE_W, 0.0, 1.0)
     assert np.nonzero(np.asarray(got.nbr_present[0]))[0].tolist() == [13 + 9]
     np.testing.assert_allclose(np.asarray(got.nbr_hist[0, 13 + 9, -1]), (13.6, 0.0), atol=2e-3)
