@@ -225,13 +225,14 @@ def read_shard(file: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """One shard file, checked against the layout."""
     try:
         with np.load(file) as z:
-            shard = {k: z[k] for k in SHARD_KEYS}
+            missing = [k for k in SHARD_KEYS if k not in z.files]
+            shard = {k: z[k] for k in SHARD_KEYS if k not in missing}
     except FileNotFoundError:
         raise InputError(f"missing shard {file}") from None
-    except KeyError as e:
-        raise InputError(f"shard {file} lacks array {e}") from None
     except (OSError, ValueError, zipfile.BadZipFile) as e:
         raise InputError(f"cannot read shard {file}: {e}") from None
+    if missing:  # numpy's own KeyError names the key inside a longer sentence
+        raise InputError(f"shard {file} lacks array {missing[0]!r}")
     s, m = len(shard["hist"]), len(shard["nbr_hist"])
     expected = {
         "hist": ((s, HIST_LEN, 2), np.float32), "fut": ((s, FUT_LEN, 2), np.float32),
