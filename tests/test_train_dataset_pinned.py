@@ -82,6 +82,7 @@ def test_generated_samples_are_each_simulation_alone_the_last_truncated(alone):
 
 
 def test_changing_the_seed_or_count_reuses_the_compiled_simulation(alone):
+    generate_samples(CFG1, 1, jax.random.key(5))  # compiled here: caches may be cleared between tests
     before = _simulate_batch._cache_size()
     other = dataclasses.replace(CFG1, sampling=dataclasses.replace(CFG1.sampling, seed=9, num_samples=2))
     got = generate_samples(other, 2, jax.random.key(5))
