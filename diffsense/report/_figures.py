@@ -15,6 +15,7 @@ label before it places the axes, about half of the horizon figure's drawing time
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -52,7 +53,8 @@ def _place(fig: Figure, *, legend_rows: int, title: bool, right_in: float = _RIG
 
 
 def _label(key: Any, scale: float, unit: str) -> str:
-    if isinstance(key, (int, float, np.floating)):
+    """A step's legend text: a number (numpy's too) scaled and with its unit, anything else as is."""
+    if isinstance(key, numbers.Real) and not isinstance(key, bool):
         return f"{float(key) * scale:g}{' ' + unit if unit else ''}"
     return str(key)
 
