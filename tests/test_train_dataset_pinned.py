@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import jax
 import numpy as np
 import pytest
 
+from diffsense import _io
 from diffsense.config import to_dict
 from diffsense.errors import InputError
 from diffsense.train._dataset import (
@@ -91,10 +93,20 @@ def test_changing_the_seed_or_count_reuses_the_compiled_simulation(alone):
 
 
 def test_a_dataset_holds_one_shard_per_batch_and_counts_what_it_holds(tmp_path, alone):
-    sizes = []
-    out = tmp_path / "deep" / "set"
-    meta = write_dataset(CFG1, out, 2 * PER_SIM + 3, 5, progress=sizes.append)
+    sizes, beside, registered = [], [], []
+    out = tmp_path / "deep" / "er" / "set"
+
+    def progress(n):  # while a shard is written: the temporary folder beside `out`, registered
+        sizes.append(n)
+        beside.append(sorted(p.name for p in out.parent.iterdir()))
+        registered.append(sorted(p for p in _io._TEMPORARIES if Path(p).parent == out.parent))
+
+    meta = write_dataset(CFG1, out, 2 * PER_SIM + 3, 5, progress=progress)
     assert sizes == [PER_SIM, PER_SIM, 3]
+    (partial,) = beside[0]
+    assert partial.startswith(".set.") and partial.endswith(".partial") and beside == [[partial]] * 3
+    assert registered == [[str(out.parent / partial)]] * 3
+    assert not [p for p in _io._TEMPORARIES if Path(p).parent == out.parent]  # released once published
     shards = list(read_dataset(out))
     for got, want in zip(shards, alone, strict=True):
         for k in want:
@@ -114,8 +126,9 @@ def test_a_dataset_holds_one_shard_per_batch_and_counts_what_it_holds(tmp_path, 
         "samples_per_simulation": PER_SIM, "rate_hz": 5.0, "hist_len": 16, "fut_len": 25,
         "grid": {"lanes": 3, "cells": 13, "cell_m": 15 * 0.3048, "slots": 39}}
     assert meta["config"] == to_dict(CFG1)
+    assert meta["frame"] == "SI road frame of the target at the prediction instant: (lon_m forward, lat_m left)"
     assert sorted(p.name for p in out.iterdir()) == ["meta.json", "shard_00000.npz", "shard_00001.npz", "shard_00002.npz"]
-    assert [p.name for p in (tmp_path / "deep").iterdir()] == ["set"]  # no temporary beside it
+    assert [p.name for p in out.parent.iterdir()] == ["set"]  # no temporary left beside it
 
 
 def test_an_empty_folder_is_filled_and_anything_else_refused(tmp_path):
