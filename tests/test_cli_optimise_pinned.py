@@ -140,6 +140,10 @@ def _refused(argv, tmp_path) -> str:
     (["--sensitivity", "rain_mm_h,snow"], ("--sensitivity: no sensitivity to 'snow' (known: rain_mm_h, "
                                            "fog_visibility_m, traffic_speed_kmh)")),
     (["--bogus"], "unrecognized arguments: --bogus"),
+    (["--traffic-speed-offset-kmh", "-500"], ("sc01: a traffic speed offset of -500 km/h stops its slowest vehicle "
+                                              "(start speed 35 km/h): every vehicle must start moving")),
+    (["--scenarios", "sc01", "--scenes", "highd:01_tracks.csv"],
+     "--scenarios and --scenes exclude each other: recorded scenes replace the scenarios"),
 ])
 def test_refusals_before_any_computation_by_whole_message(tmp_path, recorded, argv, message):
     assert _refused(argv, tmp_path) == message
@@ -153,12 +157,29 @@ def test_files_in_the_way_are_refused(tmp_path, recorded):
     assert recorded["setup"] == []
 
 
+def test_recorded_scenes_leave_the_config_s_scenarios_unread(tmp_path, recorded):
+    from _recorded_files import write_highd
+
+    (tmp_path / "highd").mkdir()
+    tracks = write_highd(tmp_path / "highd")
+    config = tmp_path / "c.toml"
+    config.write_text('[problem]\nscenarios = ["no-such-scenario"]\n')
+    assert optimise.main(["--config", str(config), "--scenes", f"highd:{tracks}", "--out", str(tmp_path / "out")]) == 0
+    assert _refused(["--config", str(config)], tmp_path).startswith("unknown scenario 'no-such-scenario'")
+
+
 def test_the_memory_limit_defaults_to_half_the_machine(tmp_path, recorded, monkeypatch):
-    monkeypatch.setattr(_optimise, "memory_estimate_bytes", lambda problem: 3.0e9)
+    estimate = [3.0e9]
+    monkeypatch.setattr(_optimise, "memory_estimate_bytes", lambda problem: estimate[0])
     assert _refused(["--max-memory-gb", "2"], tmp_path) == (
         "the run needs an estimated 3.0 GB for its fixed data, over the limit of 2.0 GB (fewer variants or "
         "Monte-Carlo samples, or --max-memory-gb)")
     assert optimise.main(["--max-memory-gb", "3", "--out", str(tmp_path / "a")]) == 0  # at the limit: allowed
+    estimate[0] = 3.0e9 + 1
+    assert _refused(["--max-memory-gb", "3"], tmp_path).startswith("the run needs an estimated 3.0 GB")
+    estimate[0] = 0.4e9
+    assert optimise.main(["--max-memory-gb", "0.5", "--out", str(tmp_path / "b")]) == 0  # a limit under 1 GB
+    estimate[0] = 3.0e9
     pages = {"SC_PAGE_SIZE": 4096, "SC_PHYS_PAGES": math.ceil(5.0e9 / 4096)}
     monkeypatch.setattr("os.sysconf", lambda name: pages[name])
     assert _refused([], tmp_path).startswith("the run needs an estimated 3.0 GB for its fixed data, over the limit of 2.5 GB")

@@ -90,6 +90,8 @@ def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict
             fields["sensor_config"] = suite["sensor_config"]
     if args.cost_weight is not None:
         fields["cost_weight"] = args.cost_weight
+    if args.scenarios is not None and args.scenes is not None:  # else the scenarios pass unread
+        raise InputError("--scenarios and --scenes exclude each other: recorded scenes replace the scenarios")
     if args.scenarios is not None:
         fields["scenarios"] = args.scenarios
     if args.scenes is not None:

@@ -54,7 +54,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", help="comma-separated sweep steps (default: the paper's for hfov)")
     p.add_argument("--scenarios", help="comma-separated scenario names or TOML paths")
     p.add_argument("--scenes", metavar="KIND:PATH",
-                   help="recorded traffic instead of scenarios: highd:NN_tracks.csv or ngsim:TRAJECTORIES.csv")
+                   help="recorded traffic instead of scenarios (not with --scenarios): highd:NN_tracks.csv or "
+                   "ngsim:TRAJECTORIES.csv")
     p.add_argument("--variants", type=int, help="variants per scenario")
     p.add_argument("--model", help="predictor weights (.msgpack of this project or a PyTorch checkpoint)")
     p.add_argument("--profile", choices=("physical", "paper"),
