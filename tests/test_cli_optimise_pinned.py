@@ -6,6 +6,7 @@ every refusal before any computation by its whole message."""
 from __future__ import annotations
 
 import math
+import shutil
 from pathlib import Path
 from typing import ClassVar
 
@@ -97,14 +98,20 @@ def test_one_sensor_writes_its_files_into_out_itself(tmp_path, recorded, capsys,
 
 
 def test_a_worker_of_a_distributed_run_writes_to_scratch_and_prints_nothing(tmp_path, recorded, capsys, monkeypatch):
-    joined = []
+    joined, at_exit = [], []
     monkeypatch.setattr(_distributed, "initialize", lambda *a: joined.append(a))
     monkeypatch.setattr(_distributed, "is_writer", lambda: False)
+    monkeypatch.setattr("atexit.register", lambda *a: at_exit.append(a))
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
     out = tmp_path / "out"
     argv = ["--sensor", "radar", "--out", str(out), "--distributed", "--coordinator", "h:1", "--num-processes", "2",
             "--process-id", "1"]
     assert optimise.main(argv) == 0
     assert joined == [("h:1", 2, 1)] and not out.exists()
+    (scratch,) = (tmp_path / "tmp").iterdir()  # the worker's outputs, removed when the process ends
+    assert scratch.name.startswith("diffsense-worker-") and (scratch / "result.json").read_text() == "result radar"
+    assert at_exit == [(shutil.rmtree, scratch, True)]
     assert capsys.readouterr().out == "" and _Progress.made[0].quiet is True
     monkeypatch.setattr(_distributed, "is_writer", lambda: True)
     assert optimise.main(argv) == 0
