@@ -59,6 +59,8 @@ def test_the_objective_figure_draws_its_curves_in_display_units(drawn):
     slope, zero = twin.get_lines()
     np.testing.assert_allclose(_xy(slope), [x, np.array([-2.0, 0.5, 1.0]) / SCALE])  # [m/deg]
     np.testing.assert_allclose(zero.get_ydata(), [0.0, 0.0])
+    assert [to_rgba(line.get_color()) for line in (slope, zero)] == [to_rgba("C2")] * 2
+    assert (slope.get_marker(), slope.get_linestyle()) == (".", "-")
     assert (ax.get_xlabel(), ax.get_ylabel(), twin.get_ylabel()) == ("hfov [deg]", "E_RMSE [m]", "dE/dhfov [m/deg]")
     (legend,) = fig.legends
     assert [t.get_text() for t in legend.get_texts()] == [
@@ -79,6 +81,21 @@ def test_the_objective_figure_without_a_unit_and_with_a_title(drawn):
     assert fig.legends[0].get_texts()[3].get_text() == "r* = 1"
     assert fig._suptitle.get_text() == "camera" and fig._suptitle.get_fontsize() == 10
     np.testing.assert_allclose(_margins_in(fig)[3], 0.35 + 0.3)
+
+
+def test_the_figures_defaults_name_r_in_its_own_units(drawn):
+    plot_objective("o.png", **OBJECTIVE)
+    plot_rmse_horizon("h.png", {"RLC": {"gt": GT, "steps": {0.5: GT}}})
+    plot_detection_timeline("d.png", {0.5: np.ones((3, 1))}, ["target"])
+    (objective, _, _), (horizon, _, _), (timeline, _, _) = drawn
+    ax, twin = objective.axes
+    assert (ax.get_xlabel(), twin.get_ylabel()) == ("r", "dE/dr")
+    np.testing.assert_allclose(ax.get_lines()[0].get_xdata(), [0.5, 1.0, 1.5])
+    assert [f._suptitle for f in (objective, horizon, timeline)] == [None] * 3
+    assert horizon.axes[0].get_lines()[1].get_label() == "r 0.5"
+    assert timeline.axes[0].get_title() == "r 0.5"
+    vertices = timeline.axes[0].collections[0].get_paths()[0].vertices
+    assert vertices[:, 0].max() == pytest.approx(0.2)  # three frames 0.1 s apart
 
 
 GT = np.linspace(0.1, 2.5, 25)
@@ -136,13 +153,14 @@ def test_numpy_numbers_are_scaled_like_python_numbers(drawn):
 
 def test_the_detection_timeline_draws_bands_as_tall_as_the_probability(drawn):
     roles = ["target", "lead", "follower"]
-    p = {0.5: np.array([[0.0, 0.5, 1.0], [0.25, 1.5, -0.5], [1.0, 0.5, 0.0], [0.5, 0.5, 0.5]]), "paper": np.full((4, 3), 0.5)}
+    p = {0.5: np.array([[0.0, 0.5, 1.0], [0.25, 1.5, -0.5], [1.0, 0.5, 0.0], [0.5, 0.5, 0.5]]), "paper": np.full((4, 3), 0.5),
+         1.0: np.zeros((4, 3))}
     plot_detection_timeline("d.png", p, roles, dt_s=0.2, param="hfov", scale=SCALE, unit="deg", title="radar")
     ((fig, path, dpi),) = drawn
     assert (path, dpi) == ("d.png", 120)
-    np.testing.assert_allclose(fig.get_size_inches(), [7.0, 0.5 + 0.35 * 3 * 2 + 0.6 * 2])
-    top, bottom = fig.axes
-    assert [ax.get_title() for ax in (top, bottom)] == ["hfov 28.6479 deg", "hfov paper"]
+    np.testing.assert_allclose(fig.get_size_inches(), [7.0, 0.5 + 0.35 * 3 * 3 + 0.6 * 3])
+    top, bottom, last = fig.axes
+    assert [ax.get_title() for ax in (top, bottom, last)] == ["hfov 28.6479 deg", "hfov paper", "hfov 57.2958 deg"]
     bands = top.collections
     assert len(bands) == 3
     for v, band in enumerate(bands):
@@ -153,11 +171,14 @@ def test_the_detection_timeline_draws_bands_as_tall_as_the_probability(drawn):
         assert vertices[:, 0].min() == pytest.approx(0.0) and vertices[:, 0].max() == pytest.approx(0.6)
         assert to_rgba(band.get_facecolor()[0])[:3] == to_rgba(f"C{v}")[:3]
     assert {float(y) for y in bottom.collections[2].get_paths()[0].vertices[:, 1]} == {2.0, 2.4}
+    # Steps held half a frame either side of each frame's time, not lines between frames.
+    x_steps = np.unique(np.round(np.concatenate([p.vertices[:, 0] for p in bands[0].get_paths()]), 9))
+    np.testing.assert_allclose(x_steps, [0.0, 0.1, 0.3, 0.5, 0.6])
     np.testing.assert_allclose(top.get_yticks(), [0.4, 1.4, 2.4])
     assert [t.get_text() for t in top.get_yticklabels()] == roles
     assert top.get_ylim() == (-0.1, 3.0)
-    assert bottom.get_xlabel() == "time [s]  (band height = detection probability)" and top.get_xlabel() == ""
-    assert top.get_shared_x_axes().joined(top, bottom)
+    assert [ax.get_xlabel() for ax in (top, bottom, last)] == ["", "", "time [s]  (band height = detection probability)"]
+    assert top.get_shared_x_axes().joined(top, last)
     assert fig._suptitle.get_text() == "radar"
 
 
