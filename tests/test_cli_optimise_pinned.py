@@ -173,6 +173,16 @@ def test_recorded_scenes_leave_the_config_s_scenarios_unread(tmp_path, recorded)
     config.write_text('[problem]\nscenarios = ["no-such-scenario"]\n')
     assert optimise.main(["--config", str(config), "--scenes", f"highd:{tracks}", "--out", str(tmp_path / "out")]) == 0
     assert _refused(["--config", str(config)], tmp_path).startswith("unknown scenario 'no-such-scenario'")
+    assert _refused(["--scenes", f"highd:{tracks}", "--sensitivity", "traffic_speed_kmh"], tmp_path) == (
+        f"no sensitivity to traffic_speed_kmh for recorded scenes (highd:{tracks}): they move at the speeds they "
+        "were recorded at")
+
+
+def test_the_console_script_ends_the_process_once_main_returns(monkeypatch):
+    ran = []
+    monkeypatch.setattr(cli, "run", lambda main, **kw: ran.append((main, kw)))
+    optimise.console()
+    assert ran == [(optimise.main, {"end_process": True})]
 
 
 def test_the_memory_limit_defaults_to_half_the_machine(tmp_path, recorded, monkeypatch):
