@@ -89,7 +89,8 @@ def test_one_sensor_writes_its_files_into_out_itself(tmp_path, recorded, capsys,
     assert [result for result, _ in recorded["written"]] == ["result camera"]
     assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "result.json"]
     (progress,) = _Progress.made
-    assert progress.quiet is True and progress.lines[0] == f"loaded the predictor {model}"
+    assert progress.quiet is True and progress.lines == [
+        f"loaded the predictor {model}", f"wrote {out}/: result.json, objective.png, rmse_horizon.png, detections.png"]
     assert recorded["solved"][0][2]["predictor"] == f"predictor {str(model)!r}"
     assert capsys.readouterr().out == "\nsummary camera [deg]\nbreakdown camera\n"
     monkeypatch.setattr(report, "write_run", lambda result, folder: {"param": None, "units": {}, "sensor": "suite"})
