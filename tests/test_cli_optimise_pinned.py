@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import shutil
+import threading
 from pathlib import Path
 from typing import ClassVar
 
@@ -96,6 +97,19 @@ def test_one_sensor_writes_its_files_into_out_itself(tmp_path, recorded, capsys,
     monkeypatch.setattr(report, "write_run", lambda result, folder: {"param": None, "units": {}, "sensor": "suite"})
     assert optimise.main(["--sensor", "camera", "--out", str(out)]) == 0
     assert capsys.readouterr().out == "\nbox suite\nbreakdown suite\n"
+
+
+def test_the_sensitivities_asked_reach_the_solve_and_the_background_import_fails_nothing(tmp_path, recorded,
+                                                                                          monkeypatch):
+    failed = []
+    monkeypatch.setattr(threading, "excepthook", failed.append)
+    before = set(threading.enumerate())
+    argv = ["--sensor", "radar", "--sensitivity", "rain_mm_h, fog_visibility_m", "--out", str(tmp_path / "out")]
+    assert optimise.main(argv) == 0
+    for thread in set(threading.enumerate()) - before:
+        thread.join(timeout=60)
+    assert recorded["solved"][0][2]["sensitivity"] == ("rain_mm_h", "fog_visibility_m")
+    assert failed == []
 
 
 def test_a_worker_of_a_distributed_run_writes_to_scratch_and_prints_nothing(tmp_path, recorded, capsys, monkeypatch):
