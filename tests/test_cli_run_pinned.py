@@ -114,6 +114,56 @@ def test_a_signal_on_the_pipe_ends_the_process_with_its_line(monkeypatch, signum
         os.close(read_fd)  # the watcher closed it
 
 
+def test_the_line_comes_after_what_the_program_printed_and_a_stuck_flush_does_not_hold_it(monkeypatch):
+    events, release = [], threading.Event()
+
+    class Stream:
+        def __init__(self, name, stuck=False):
+            self.name, self.stuck = name, stuck
+
+        def flush(self):
+            if self.stuck:
+                release.wait(10)  # a pipe nobody reads
+            events.append(f"flushed {self.name}")
+
+    monkeypatch.setattr(_run._io, "abandon_temporaries", lambda: None)
+    monkeypatch.setattr(_run.os, "write", lambda fd, data: events.append(data))
+    monkeypatch.setattr(_run.os, "_exit", lambda code: events.append(code))
+    monkeypatch.setattr(_run.sys, "stdout", Stream("stdout"))
+    monkeypatch.setattr(_run.sys, "stderr", Stream("stderr"))
+    _run._end(signal.SIGTERM)
+    assert events == ["flushed stdout", "flushed stderr", b"terminated\n", 143]
+    events.clear()
+    monkeypatch.setattr(_run.sys, "stdout", Stream("stdout", stuck=True))
+    _run._end(signal.SIGINT)
+    assert events == [b"interrupted\n", 130]  # written while the flush still hangs
+    release.set()
+
+
+def test_a_failing_flush_is_ignored(monkeypatch):
+    class Broken:
+        def flush(self):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(_run.sys, "stdout", Broken())
+    monkeypatch.setattr(_run.sys, "stderr", Broken())
+    _run._flush_quietly()
+
+
+@pytest.mark.parametrize("processes, distributed", [(None, False), (1, False), (2, True)])
+def test_only_a_run_of_several_processes_counts_as_distributed(monkeypatch, processes, distributed):
+    class Jax:
+        @staticmethod
+        def process_count():
+            return processes
+
+    if processes is None:
+        monkeypatch.delitem(_run.sys.modules, "jax")
+    else:
+        monkeypatch.setitem(_run.sys.modules, "jax", Jax)
+    assert _run._distributed() is distributed
+
+
 def test_other_signals_on_the_pipe_end_nothing(monkeypatch):
     ends = []
     monkeypatch.setattr(_run, "_end", ends.append)
