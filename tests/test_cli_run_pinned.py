@@ -219,8 +219,25 @@ def test_jax_compilation_cache_dir_wins(configured, monkeypatch, tmp_path):
 @pytest.mark.parametrize("how", ["argument", "environment", "unwritable"])
 def test_no_cache_configures_none(configured, monkeypatch, tmp_path, how):
     (tmp_path / "file").write_text("")
-    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path / "file" / "cache"))  # under a file
+    where = tmp_path / "file" / "cache" if how == "unwritable" else tmp_path / "cache"  # under a file, or free
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(where))
     if how == "environment":
         monkeypatch.setenv("DIFFSENSE_NO_CACHE", "1")
     _run.setup_jax(compilation_cache=how != "argument")
     assert configured == {"jax_enable_x64": True, "kept": [None]}
+    assert not (tmp_path / "cache").exists()
+
+
+@pytest.mark.parametrize("value", ["0", "yes", ""])
+def test_only_diffsense_no_cache_1_turns_the_cache_off(configured, monkeypatch, tmp_path, value):
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("DIFFSENSE_NO_CACHE", value)
+    _run.setup_jax()
+    assert configured["jax_compilation_cache_dir"] == str(tmp_path / "cache")
+
+
+def test_a_second_start_up_reuses_the_cache_folder(configured, monkeypatch, tmp_path):
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "cache").mkdir()
+    _run.setup_jax()
+    assert configured["jax_compilation_cache_dir"] == str(tmp_path / "cache")
