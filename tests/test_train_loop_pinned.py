@@ -6,6 +6,9 @@ steps and at the end, the epoch lines, the model card; the checkpoint's refusals
 
 from __future__ import annotations
 
+import os
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -64,6 +67,7 @@ def recorded(monkeypatch):
         log["saved"].append(step)
         save(path, cfg, step, *rest)
 
+    monkeypatch.setattr(_loop.time, "monotonic", lambda: 100.0)  # a stopped clock: wall times add exactly
     monkeypatch.setattr(_loop, "_make_step", make_step)
     monkeypatch.setattr(_loop, "_make_predict", make_predict)
     monkeypatch.setattr(_loop, "_save_checkpoint", save_checkpoint)
@@ -119,7 +123,14 @@ def test_steps_take_the_seeded_permutation_phase_by_phase(tmp_path, data, record
                             "num_train_samples": 72, "num_val_samples": 24, "num_val_simulations": 1}
     assert card["validation"]["rmse_m"]["cslstm"] == [round(r, 4) for r in rmse]
     assert card["validation"]["horizon_s"] == [1, 2, 3, 4, 5]
-    assert card["parameters"] > 0 and card["wall_time_s"] >= 0.0
+    assert card["parameters"] > 0 and card["wall_time_s"] == 0.0
+    assert card["frame"] == ("model frame: feet, lateral positive right (as the NGSIM checkpoints); "
+                             "diffsense.predictors converts SI at its boundary")
+    assert sorted(card["validation"]["rmse_by_axis_m"]) == ["constant_velocity", "cslstm"]
+    assert sorted(card["validation"]["rmse_by_axis_m"]["cslstm"]) == ["lat", "lon"]
+    assert sorted(card["software"]) == ["flax", "jax", "optax"]
+    assert card["machine"] == {"platform": jax.default_backend(), "device": jax.devices()[0].device_kind,
+                               "cpu_count": os.cpu_count()}
     assert (tmp_path / "w.msgpack").exists()
 
 
