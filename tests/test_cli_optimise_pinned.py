@@ -164,12 +164,26 @@ def _refused(argv, tmp_path) -> str:
     (["--bogus"], "unrecognized arguments: --bogus"),
     (["--traffic-speed-offset-kmh", "-500"], ("sc01: a traffic speed offset of -500 km/h stops its slowest vehicle "
                                               "(start speed 35 km/h): every vehicle must start moving")),
+    (["--miss-penalty", "big"], "argument --miss-penalty: invalid float value: 'big'"),
+    (["--fog-visibility-m", "thick"], "argument --fog-visibility-m: invalid float value: 'thick'"),
+    (["--traffic-speed-offset-kmh", "fast"], "argument --traffic-speed-offset-kmh: invalid float value: 'fast'"),
+    (["--mc-samples", "8.5"], "argument --mc-samples: invalid int value: '8.5'"),
     (["--scenarios", "sc01", "--scenes", "highd:01_tracks.csv"],
      "--scenarios and --scenes exclude each other: recorded scenes replace the scenarios"),
 ])
 def test_refusals_before_any_computation_by_whole_message(tmp_path, recorded, argv, message):
     assert _refused(argv, tmp_path) == message
     assert recorded["setup"] == [] and not (tmp_path / "out").exists()
+
+
+def test_the_parser_s_defaults_and_choices():
+    args = optimise._parser().parse_args([])
+    assert (args.out, args.pareto, args.distributed, args.quiet, args.max_memory_gb) == ("out", None, False, False, None)
+    assert optimise._parser().parse_args(["--pareto"]).pareto == ""  # the default weights
+    for kind in ("auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard"):
+        assert optimise._parser().parse_args(["--estimator", kind]).estimator == kind
+    with pytest.raises(InputError, match=r"^argument --estimator: invalid choice: 'Hard' \(choose from "):
+        optimise._parser().parse_args(["--estimator", "Hard"])  # how the choices are quoted varies with Python
 
 
 def test_files_in_the_way_are_refused(tmp_path, recorded):
