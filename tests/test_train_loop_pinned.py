@@ -7,6 +7,7 @@ steps and at the end, the epoch lines, the model card; the checkpoint's refusals
 from __future__ import annotations
 
 import os
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +17,7 @@ import pytest
 import _tiny_traffic
 from diffsense.config import from_dict, to_dict
 from diffsense.errors import InputError
-from diffsense.train import TrainConfig, load_samples
+from diffsense.train import TrainConfig, constant_velocity_m, load_samples, rmse_per_second
 from diffsense.train import _loop
 from diffsense.train._data import split_by_simulation
 
@@ -57,7 +58,7 @@ def recorded(monkeypatch):
 
     def make_predict(graphdef):
         def predict(params, hist, nbr_hist, nbr_slot, nbr_weight):
-            log["val_calls"].append(np.asarray(hist))
+            log["val_calls"].append([np.asarray(a) for a in (hist, nbr_hist, nbr_slot, nbr_weight)])
             return jnp.zeros((hist.shape[0], 25, 2), jnp.float32)
         return predict
 
@@ -67,7 +68,7 @@ def recorded(monkeypatch):
         log["saved"].append(step)
         save(path, cfg, step, *rest)
 
-    monkeypatch.setattr(_loop.time, "monotonic", lambda: 100.0)  # a stopped clock: wall times add exactly
+    monkeypatch.setattr(_loop, "time", SimpleNamespace(monotonic=lambda: 100.0))  # the loop's clock, stopped
     monkeypatch.setattr(_loop, "_make_step", make_step)
     monkeypatch.setattr(_loop, "_make_predict", make_predict)
     monkeypatch.setattr(_loop, "_save_checkpoint", save_checkpoint)
@@ -94,9 +95,11 @@ def _zero_prediction_rmse(val_set) -> list[float]:
     return [float(np.sqrt(d2[:, k].mean())) for k in (4, 9, 14, 19, 24)]
 
 
-def test_steps_take_the_seeded_permutation_phase_by_phase(tmp_path, data, recorded, capsys):
+def test_steps_take_the_seeded_permutation_phase_by_phase(tmp_path, data, recorded, capsys, monkeypatch):
     train_set, val_set = _split(data)
     assert (len(train_set), len(val_set)) == (72, 24)
+    clock = iter([100.0])  # the run's start, then 0.26 s later for every reading after it
+    monkeypatch.setattr(_loop, "time", SimpleNamespace(monotonic=lambda: next(clock, 100.26)))
     card = _loop.train(_cfg(tmp_path, data), progress=False)
     want = _expected_batches(train_set, 2)
     assert len(recorded["steps"]) == 8 and recorded["made"] == [(8, False)]
@@ -116,14 +119,18 @@ def test_steps_take_the_seeded_permutation_phase_by_phase(tmp_path, data, record
     # Validation: batches of 10 rows wrapping around the 24 samples, after each epoch and at the end.
     assert len(recorded["val_calls"]) == 3 * 3
     for call, rows in zip(recorded["val_calls"][:3], (range(10), range(10, 20), range(20, 30))):
-        np.testing.assert_array_equal(call, val_set.hist[np.asarray(rows) % 24])
+        index = np.asarray(rows) % 24
+        for got, want in zip(call, (val_set.hist, val_set.nbr_hist, val_set.nbr_slot, val_set.nbr_weight), strict=True):
+            np.testing.assert_array_equal(got, want[index])
     assert card["steps"] == 8 and card["epochs"] == 2 and card["maneuvers"] is False
     assert card["model"] == "CS-LSTM (Deo & Trivedi 2018), single-mode decoder"
     assert card["data"] == {"path": str(data), "generator_seed": 0, "generator_config": {"tiny": True},
                             "num_train_samples": 72, "num_val_samples": 24, "num_val_simulations": 1}
     assert card["validation"]["rmse_m"]["cslstm"] == [round(r, 4) for r in rmse]
+    cv = constant_velocity_m(val_set.hist_m, 2)
+    assert card["validation"]["rmse_m"]["constant_velocity"] == [round(float(r), 4) for r in rmse_per_second(cv, val_set.fut_m)]
     assert card["validation"]["horizon_s"] == [1, 2, 3, 4, 5]
-    assert card["parameters"] > 0 and card["wall_time_s"] == 0.0
+    assert card["parameters"] > 0 and card["wall_time_s"] == 0.3  # 0.26 s to a tenth
     assert card["frame"] == ("model frame: feet, lateral positive right (as the NGSIM checkpoints); "
                              "diffsense.predictors converts SI at its boundary")
     assert sorted(card["validation"]["rmse_by_axis_m"]) == ["constant_velocity", "cslstm"]
@@ -152,6 +159,12 @@ def test_an_interrupted_run_resumes_mid_epoch_as_if_never_stopped(tmp_path, data
         np.testing.assert_array_equal(a, b)
     assert recorded["saved"] == [3, 6, 8]
     assert resumed["history"] == full["history"]
+
+
+def test_the_progress_bar_counts_steps_and_shows_the_phase(tmp_path, data, recorded, capsys):
+    _loop.train(_cfg(tmp_path, data, batch_size=8), progress=True)  # 9 steps an epoch: 18 in all
+    err = capsys.readouterr().err
+    assert "| 18/18 [" in err and "epoch=2, loss=" in err and "phase=nll]" in err and "phase=mse" not in err
 
 
 def test_a_batch_larger_than_the_training_set_is_refused(tmp_path, data, recorded):
