@@ -182,8 +182,10 @@ def test_the_parser_s_defaults_and_choices():
     assert optimise._parser().parse_args(["--pareto"]).pareto == ""  # the default weights
     for kind in ("auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard"):
         assert optimise._parser().parse_args(["--estimator", kind]).estimator == kind
-    with pytest.raises(InputError, match=r"^argument --estimator: invalid choice: 'Hard' \(choose from "):
-        optimise._parser().parse_args(["--estimator", "Hard"])  # how the choices are quoted varies with Python
+    # Every flag with choices refuses others itself (how the choices are quoted varies with Python).
+    for flag in ("--estimator", "--fill", "--profile", "--predictor-dtype", "--objective"):
+        with pytest.raises(InputError, match=rf"^argument {flag}: invalid choice: 'Hard' \(choose from "):
+            optimise._parser().parse_args([flag, "Hard"])
 
 
 def test_files_in_the_way_are_refused(tmp_path, recorded):
