@@ -159,10 +159,11 @@ def test_an_interrupted_run_resumes_mid_epoch_as_if_never_stopped(tmp_path, data
         np.testing.assert_array_equal(a, b)
     assert recorded["saved"] == [3, 6, 8]
     assert resumed["history"] == full["history"]
+    assert resumed["wall_time_s"] == full["wall_time_s"] == 0.0  # the checkpoint's wall time carried on
 
 
 def test_the_progress_bar_counts_steps_and_shows_the_phase(tmp_path, data, recorded, capsys):
-    _loop.train(_cfg(tmp_path, data, batch_size=8), progress=True)  # 9 steps an epoch: 18 in all
+    _loop.train(_cfg(tmp_path, data, batch_size=8))  # shown by default; 9 steps an epoch: 18 in all
     err = capsys.readouterr().err
     assert "| 18/18 [" in err and "epoch=2, loss=" in err and "phase=nll]" in err and "phase=mse" not in err
 
