@@ -15,6 +15,9 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
+
+from diffsense.errors import InputError
 
 PROFILE_FILL = {"physical": "hold", "paper": "zero"}
 
@@ -112,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     figures = [a.split("=", 1)[1] for a in argv if a.startswith("--figure-dir=")]
     paths = [a for a in argv if not a.startswith("--")]
-    data = [json.load(open(p)) for p in paths]
+    data = [_load(p) for p in paths]
     runs = index_runs(data)
     weights = list(dict.fromkeys(w for w, *_ in runs))
     steps = data[0]["steps_deg"]
@@ -132,5 +135,21 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _load(path: str) -> dict:
+    """One results file of `benchmarks/case_study.py` (InputError if it is not JSON)."""
+    text = Path(path).read_text()  # a missing file: OSError, one line under `run`
+    try:
+        return json.loads(text)
+    except ValueError as e:
+        raise InputError(f"{path}: not a results file: {e}") from None
+
+
+def console(argv: list[str] | None = None) -> None:
+    """`main` under the command line's error contract (`diffsense.cli.run`)."""
+    from diffsense.cli._run import run
+
+    run(lambda: main(argv))
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    console()
