@@ -76,6 +76,9 @@ def test_a_scenario_flatter_than_a_centimetre_has_no_best_or_worst():
         "| ngsim | physical | radar | LLC | 1.00 | 1.00 | 1.00 | flat |  |"]
     assert table[-1] == "| ngsim | paper | camera | LLC | 1.00 | 2.00 | 3.50 | 30 | 90 |"
     assert len(table) == 2 + 4 * 2
+    edge = case_study.index_runs([{"runs": [_run("paper", "camera", "zero", [0.0, 0.01, 0.005],
+                                                  {"EDGE": [0.0, 0.01, 0.005]})]}])
+    assert case_study.per_scenario(edge, STEPS).endswith("| EDGE | 0.00 | 0.01 | 0.01 | 30-90 | 60 |")  # 1 cm: not flat
 
 
 def test_the_imputation_table_holds_every_radar_fill():
@@ -120,6 +123,8 @@ def test_the_page_prints_every_section_and_asks_for_four_figures(tmp_path, monke
     assert list(curves) == ["RLC", "LLC"] and curves["LLC"]["gt"] == [h + 1 for h in HORIZON]
     assert curves["RLC"]["steps"] == {r: [h + k for h in HORIZON] for k, r in enumerate(STEPS)}
     assert case_study.main([str(results)]) == 0 and len(drawn) == 4  # no --figure-dir: no figures
+    monkeypatch.setattr(case_study.sys, "argv", ["case_study", str(results), f"--figure-dir={tmp_path}/a=b"])
+    assert case_study.main() == 0 and drawn[-1][0] == f"{tmp_path}/a=b/case_camera_paper_ngsim.png"
 
 
 @pytest.mark.parametrize("content, message", [
