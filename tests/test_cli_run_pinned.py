@@ -158,10 +158,8 @@ def test_only_a_run_of_several_processes_counts_as_distributed(monkeypatch, proc
         def process_count():
             return processes
 
-    if processes is None:
-        monkeypatch.delitem(_run.sys.modules, "jax")
-    else:
-        monkeypatch.setitem(_run.sys.modules, "jax", Jax)
+    # None: jax never imported (a None entry, not a deletion, which a concurrent import would refill).
+    monkeypatch.setitem(_run.sys.modules, "jax", None if processes is None else Jax)
     assert _run._distributed() is distributed
 
 
