@@ -135,6 +135,7 @@ def test_an_empty_folder_is_filled_and_anything_else_refused(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert write_dataset(CFG1, empty, 2, 5)["num_samples"] == 2
+    assert write_dataset(CFG1, tmp_path / "one", 1, 5)["num_samples"] == 1  # the least there is
     for name, make in (("full", lambda p: (p.mkdir(), (p / "x").write_text(""))), ("file", lambda p: p.write_text(""))):
         make(tmp_path / name)
         with pytest.raises(InputError) as e:
