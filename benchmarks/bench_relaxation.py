@@ -18,7 +18,9 @@ For each seed (scene variants, measurement noise and the reference's uniforms), 
 - solve: on each --solve LO:HI, `diffsense.optimise` with relaxed-reference at each lambda of
   --solve-temperatures (its default continuation 4, 2, 1 times lambda; the answer judged on
   E_ref), E_ref(r*) against the best point of the 1-deg grid of E_ref on LO:HI (taken from an
-  agreement grid LO:HI:1 when there is one) and the evaluations it used.
+  agreement grid LO:HI:1 when there is one) and the evaluations it used; and its search counted
+  as Brent's is: every program in order, and the first count from which the best E_ref seen is
+  within 0.1 % of the grid's best (`search_trace`).
 - judge (--judge-draws M): each solve's answer r* and the grid's best r_b on E_ref's own K draws
   and on M fresh draws of the same scene (indices K ... K+M-1, independent of the draws both were
   chosen on), with the paired difference E(r*) / E(r_b) - 1 and its standard error (the delta
@@ -140,7 +142,8 @@ def solves(args, seed, grids) -> list[dict]:
                 schedule = tuple(float(v) for v in args.tau_schedule.split(","))
                 problem = dataclasses.replace(problem, solve=dataclasses.replace(problem.solve, tau_schedule=schedule))
             t0 = time.perf_counter()
-            result = ds.optimise(problem, figures=False)
+            events = []
+            result = ds.optimise(problem, figures=False, on_evaluation=events.append)
             ref = result.reference
             row = {"seed": seed, "interval": text, "estimator": args.estimator, "lambda": lam, "tau_schedule": list(problem.solve.tau_schedule),
                    "grid_best_E_ref": best,
@@ -148,7 +151,7 @@ def solves(args, seed, grids) -> list[dict]:
                    "E_ref_star_se": ref["E_ref_star_se"], "rel_to_grid_best": ref["E_ref_star"] / best - 1.0,
                    "sweep_steps": len(result.sweep), "objective": result.evaluations["objective"],
                    "gradient": result.evaluations["gradient"], "notes": list(result.notes),
-                   "wall_s": time.perf_counter() - t0}
+                   "wall_s": time.perf_counter() - t0} | search_trace(events, ref["estimator_used"], best)
             E = ds.objective(problem) if args.judge_draws or args.brent else None  # built once for both
             if args.judge_draws:
                 row["judge"] = judge(args, E, row["r_star"], known)
@@ -157,6 +160,23 @@ def solves(args, seed, grids) -> list[dict]:
             print(json.dumps(row), flush=True)
             out.append(row)
     return out
+
+
+def search_trace(events: list[dict], estimator_used: str, best: float) -> dict:
+    """The solve's search counted as Brent's is (`brent_on_reference`): every program it ran in
+    order (E_ref values and value-and-gradients, sweep included; the hard evaluations reported
+    after the answer left out), and the first count from which the best E_ref seen so far is
+    within 0.1 % of `best` [m]. A value-and-gradient's value is E_ref only under straight-through;
+    under another estimator it counts as a program but not as a value seen."""
+    search = [e for e in events if e["kind"] in ("reference", "soft")]
+    seen = [e["E_m"] if e["kind"] == "reference" or estimator_used == "straight-through" else np.inf
+            for e in search]
+    running = np.minimum.accumulate(seen) if seen else np.array([])
+    reached = np.nonzero(running <= best * 1.001)[0]
+    first = int(reached[0]) + 1 if reached.size else None
+    return {"search_programs": len(search), "search_value_and_grads": sum(e["kind"] == "soft" for e in search),
+            "programs_to_0.1pct": first,
+            "value_and_grads_to_0.1pct": sum(e["kind"] == "soft" for e in search[:first]) if first else None}
 
 
 def cost(args) -> list[dict]:
