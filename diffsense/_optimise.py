@@ -36,7 +36,7 @@ from diffsense.metrics import (
 from diffsense.predictors import CastPredictor, CSLSTMPredictor, load_predictor, with_compute_dtype
 from diffsense.sensors import Weather
 from diffsense.sensors._mount import relevance_stand_ins
-from diffsense.solve import Evaluator, default_steps, hard_grid_solve, solve
+from diffsense.solve import Evaluator, check_interval, check_steps, default_steps, hard_grid_solve, solve, sweep
 from diffsense.tracks import prediction_frames
 
 Progress = Callable[[str], None]
@@ -121,12 +121,15 @@ def _config(problem: Problem) -> dict[str, Any]:
     return cfgio.to_dict(fields)
 
 
-def planned_evaluations(problem: Problem) -> int:
-    """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check)."""
+def planned_evaluations(problem: Problem, sweep_soft: bool = True) -> int:
+    """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check).
+    `sweep_soft` False: the sweep reads E_soft off its E_ref (straight-through under a
+    probabilistic law), one program per step instead of two."""
     (lo, hi), = problem.params.values()
     steps = len(problem.steps) if problem.steps is not None else len(default_steps(lo, hi))
     dense = 0 if problem.dense_check is None else int(math.ceil((hi - lo) / problem.dense_check - 1e-9)) + 1
-    return 2 * steps + problem.solve.max_evaluations + 2 + problem.extra_curve_points * 2 + dense
+    sweep_programs = (2 if sweep_soft else 1) * steps
+    return sweep_programs + problem.solve.max_evaluations + 2 + problem.extra_curve_points * 2 + dense
 
 
 def memory_estimate_bytes(problem: Problem) -> int:
@@ -164,7 +167,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     run first (`diffsense._distributed.initialize`; before any JAX computation): every process
     calls `optimise` with the same problem and gets the same result.
     `on_evaluation(event)` is called after every objective evaluation the run makes, with
-    {"kind": "soft" | "hard", "E_m", "tau", "done", "planned"} (for progress displays).
+    {"kind": "soft" | "hard" | "reference", "E_m", "tau", "done", "planned"} (for progress displays).
     """
     say = progress or (lambda message: None)
     if distributed:
@@ -194,14 +197,22 @@ def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progr
     say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
         "ground-truth predictions")
     E = objective(problem, predictor=predictor) if E is None else E
-    planned = planned_evaluations(problem)
+    planned = planned_evaluations(problem, sweep_soft=not _soft_value_is_e_ref(E))
 
     def counted(kind: str, e_m: float, tau: float) -> None:
         if on_evaluation is not None:
-            on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": sum(ev.counts.values()), "planned": planned})
+            done = sum(ev.counts.values()) + ev.reference_count
+            on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": done, "planned": planned})
 
     ev = Evaluator(E, progress=counted)
     return E, ev
+
+
+def _soft_value_is_e_ref(E: Objective) -> bool:
+    """Straight-through under a probabilistic law: E_soft's value is E_ref itself, so the sweep
+    reads it off its E_ref evaluation rather than running a value-and-gradient program, and
+    every gradient evaluation's point is an answer candidate."""
+    return E.estimator_kind == "straight-through" and not is_deterministic(E.sensor)
 
 
 def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
@@ -214,8 +225,14 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
     # Under a probabilistic detection law the sweep, the answer and the polish are judged on
     # E_ref, the expectation the estimator approximates; under the threshold law E_ref is E_hard.
     e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
-    return solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
-                 value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref")
+    sweep_points, value_is_e_ref = None, _soft_value_is_e_ref(ev.objective)
+    if value_is_e_ref:
+        check_interval(lo, hi)
+        steps = check_steps(default_steps(lo, hi) if problem.steps is None else problem.steps, lo, hi)
+        sweep_points = sweep(e_answer, lambda r, tau: e_answer(r) ** 2, steps)
+    return solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve, sweep_points=sweep_points,
+                 value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref",
+                 soft_value_is_answer=value_is_e_ref)
 
 
 def _optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures: bool, say: Progress,

@@ -34,6 +34,7 @@ H = "hfov_deg"
 
 def test_the_planned_evaluations_count_the_sweep_twice_the_budget_the_answer_curves_and_dense_grid():
     assert planned_evaluations(ds.Problem()) == 2 * 6 + 20 + 2  # steps 30, 60, ..., 180
+    assert planned_evaluations(ds.Problem(), sweep_soft=False) == 6 + 20 + 2
     problem = ds.Problem(steps=[30, 60, 90], extra_curve_points=5, dense_check=10.0,
                          solve=SolveConfig(max_evaluations=12))
     assert planned_evaluations(problem) == 2 * 3 + 12 + 2 + 2 * 5 + (150 // 10 + 1)
@@ -228,3 +229,37 @@ def test_under_a_probabilistic_law_the_near_optimal_set_is_judged_on_e_ref():
     assert result.reference["answer_on"] == "E_ref"
     # the tolerance is 0.5 % of the best E_ref evaluated, which is r*'s (the answer is chosen on it)
     assert result.near_optimal["tolerance_m"] == pytest.approx(0.005 * result.reference["E_ref_star"], rel=1e-12)
+
+
+def test_under_straight_through_the_sweep_reads_e_soft_off_e_ref_and_every_value_is_a_candidate():
+    from diffsense.solve import Evaluator, solve
+    from tests.test_reference import radar_objective
+
+    config = SolveConfig(max_evaluations=9)
+    problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0),
+                         sensor_config="configs/sensors/laws/radar_swerling1.toml",
+                         estimator=ds.metrics.EstimatorConfig(reference_draws=4), solve=config, scenarios=["sc01"])
+    E, events = radar_objective(kind="auto", draws=4), []
+    assert E.estimator_kind == "straight-through"
+    result = ds.optimise(problem, E=E, figures=False, on_evaluation=events.append)
+    # the sweep: one E_ref program per step, no value-and-gradient; E_soft is that E_ref
+    assert [e["kind"] for e in events[:3]] == ["reference"] * 3
+    assert [p.E_soft for p in result.solve.sweep] == [p.E_hard for p in result.solve.sweep]
+    assert [p.E_hard for p in result.solve.sweep] == [e["E_m"] for e in events[:3]]
+    # every program is counted, E_ref's too, and the plan knows the sweep runs one per step
+    assert [e["done"] for e in events] == list(range(1, len(events) + 1))
+    assert {e["planned"] for e in events} == {planned_evaluations(problem, sweep_soft=False)}
+    # the solve with the sweep's value-and-gradient programs run (as for any other estimator):
+    # the same answer when its gradient evaluations' values are answer candidates too, a worse
+    # one here when they are not
+    solved, soft_programs = {}, {}
+    for seen in (True, False):
+        ev = Evaluator(E)
+        solved[seen] = solve(ev.solver_fns()[0], ev.e_reference, (20.0, 100.0), steps=(20.0, 60.0, 100.0),
+                             config=config, value_and_grad=ev.host_value_and_grad, answer_name="E_ref",
+                             soft_value_is_answer=seen)
+        soft_programs[seen] = ev.counts["soft"]
+    assert (result.solve.r_star, result.solve.E_hard_star) == (solved[True].r_star, solved[True].E_hard_star)
+    assert result.solve.E_hard_star < solved[False].E_hard_star
+    assert [p.E_soft for p in solved[True].sweep] == pytest.approx([p.E_hard for p in solved[True].sweep], rel=1e-6)
+    assert result.programs_run["solve"]["soft"] < soft_programs[True]  # the sweep's three are not run

@@ -57,6 +57,7 @@ def solve(
     sweep_points: Sequence[SweepPoint] | None = None,
     value_and_grad: Callable[[float, float], tuple[float, float]] | None = None,
     answer_name: str = "E_hard",
+    soft_value_is_answer: bool = False,
 ) -> SolveResult:
     """Find argmin_r E over `interval`: stepped sweep, then the continuous solve (module doc).
 
@@ -72,6 +73,10 @@ def solve(
             memoised elsewhere, e.g. `Evaluator`); `e2_soft` is then never traced.
         answer_name: what the notes call the objective `e_hard` evaluates (the caller knows:
             "E_ref" when it is the expectation over detection draws).
+        soft_value_is_answer: the soft objective's value is the answer objective's own, its
+            gradient alone relaxed (straight-through under a probabilistic law): every gradient
+            evaluation's point is then an answer candidate too, and the polish starts from the
+            best of them when it beats the levels' answer.
 
     Returns:
         A SolveResult. Raises InputError on a bad interval/steps/config and FloatingPointError
@@ -92,11 +97,13 @@ def solve(
     k = best_step(sweep_points)
     best = sweep_points[k]
     lower, upper = bracket_around(sweep_points, k, lo, hi)
-    counted = Counted(e2_soft, e_hard, dtype, value_and_grad)
+    counted = Counted(e2_soft, e_hard, dtype, value_and_grad, keep_values=soft_value_is_answer)
     xtol = config.xtol_rel * (hi - lo)
     notes: list[str] = []
     levels = _continuation(counted, best.r, (lower, upper), taus, config, xtol, notes)
     r_star, e_hard_star = _on_hard(counted, levels, best, (lo, hi), config, answer_name, notes)
+    if soft_value_is_answer:
+        r_star, e_hard_star = _best_seen(counted, r_star, e_hard_star, answer_name, notes)
     spent = counted.objective + counted.gradient
     # One evaluation stays back for E_soft at a polished r*.
     probes = min(config.hard_polish, config.max_evaluations - spent - 1)
@@ -152,6 +159,22 @@ def _continuation(counted: Counted, r0: float, bracket: tuple[float, float], tau
             LevelResult(tau=tau, r=r, gradient_evaluations=n, bound=bound, converged=done)
         )
     return levels
+
+
+def _best_seen(counted: Counted, r_star: float, e_star: float, answer_name: str,
+               notes: list[str]) -> tuple[float, float]:
+    """(r, E): the best point the gradient evaluations saw where its value, the answer
+    objective's own, is lower than the answer's, confirmed on the answer objective; else the answer."""
+    seen = [(e, r) for r, e in counted.values_seen if e < e_star and r != r_star]
+    if not seen:
+        return r_star, e_star
+    _, r = min(seen)
+    e = counted.hard(r)
+    if not e < e_star:
+        return r_star, e_star
+    notes.append(f"a gradient evaluation saw a lower {answer_name} than the levels' answer r={r_star:.6g} "
+                 f"({e_star:.6g} m): answer r={r:.6g} ({e:.6g} m)")
+    return r, e
 
 
 def _on_hard(counted: Counted, levels: list[LevelResult], best: SweepPoint, interval: tuple[float, float],

@@ -19,9 +19,15 @@ def e_from_e2(e2: Any) -> float:
 
 
 class Counted:
-    """Objective and gradient callables that count their evaluations (Python side)."""
+    """Objective and gradient callables that count their evaluations (Python side).
 
-    def __init__(self, e2_soft, e_hard, dtype, value_and_grad=None):
+    With `keep_values`, every gradient evaluation also keeps (r, E) of the soft value at r in
+    `values_seen`: for a soft objective whose value is the answer objective's (straight-through
+    under a probabilistic law) each is an answer candidate. A host `value_and_grad` gives the
+    value with the gradient; otherwise it costs an uncounted soft evaluation.
+    """
+
+    def __init__(self, e2_soft, e_hard, dtype, value_and_grad=None, keep_values=False):
         self.dtype = dtype
         self._e2 = e2_soft
         self._e_hard = e_hard
@@ -31,6 +37,8 @@ class Counted:
             self._grad = lambda r, tau: value_and_grad(float(r), float(tau))[1]
         self.objective = 0
         self.gradient = 0
+        self.keep_values = keep_values
+        self.values_seen: list[tuple[float, float]] = []
 
     def as_r(self, r: float) -> np.ndarray:
         return host_array(r, self.dtype)
@@ -49,7 +57,10 @@ class Counted:
 
     def grad(self, r: float, tau: float) -> float:
         self.gradient += 1
-        return float(self._grad(self.as_r(r), self.as_r(tau)))
+        g = float(self._grad(self.as_r(r), self.as_r(tau)))
+        if self.keep_values:
+            self.values_seen.append((float(r), e_from_e2(self._e2(self.as_r(r), self.as_r(tau)))))
+        return g
 
 
 _SECANT = BracketedSecant(rtol=0.0, atol=0.0)

@@ -1,0 +1,92 @@
+"""The continuous solve when the soft objective's value is the answer objective's own
+(straight-through under a probabilistic law: E_ref's value, a relaxed gradient).
+
+The problem, on [0, 10] with steps 0, 6, 10 and no hard polish: the gradient is that of the bowl
+(r - 5)^2, so the levels' root is 5; the value is the answer objective E(r) = 1 + |r - 4.2|,
+lowest at 4.2, which the gradient never sees. The best step is 6 (E 2.8), the levels' answer
+5 (E 1.8). Every point the gradient was asked at is an answer candidate only under
+`soft_value_is_answer`: the answer is then the lowest of them, confirmed on the answer objective.
+"""
+
+from __future__ import annotations
+
+import jax
+import pytest
+
+from diffsense.solve import SolveConfig, solve
+from diffsense.solve._continuous import _best_seen
+from diffsense.solve._levels import Counted
+
+STEPS = (0.0, 6.0, 10.0)
+CONFIG = SolveConfig(hard_polish=0)
+
+
+@pytest.fixture(autouse=True)
+def _x64():
+    jax.config.update("jax_enable_x64", True)
+
+
+def answer_E(r: float) -> float:
+    return 1.0 + abs(r - 4.2)
+
+
+def _run(value_is_answer: bool):
+    asked, hard = [], []
+
+    def value_and_grad(r, tau):
+        asked.append(r)
+        return answer_E(r) ** 2, 2.0 * (r - 5.0)
+
+    def e_hard(r):
+        hard.append(float(r))
+        return answer_E(float(r))
+
+    result = solve(lambda r, tau: r, e_hard, (0.0, 10.0), steps=STEPS, config=CONFIG,
+                   value_and_grad=value_and_grad, answer_name="E_ref", soft_value_is_answer=value_is_answer)
+    return result, asked, hard
+
+
+def test_without_it_the_answer_is_the_levels_root():
+    result, asked, _ = _run(False)
+    assert result.r_star == pytest.approx(5.0, abs=1e-6) and result.E_hard_star == pytest.approx(1.8, abs=1e-6)
+    assert min(answer_E(r) for r in asked) < result.E_hard_star  # a better point was seen, and not taken
+
+
+def test_with_it_the_answer_is_the_best_point_the_gradient_saw_confirmed_on_the_answer_objective():
+    result, asked, hard = _run(True)
+    best = min(set(asked) - set(STEPS), key=answer_E)
+    assert result.r_star == best and result.E_hard_star == answer_E(best) < 1.8
+    assert hard[-1] == best  # confirmed by one more evaluation of the answer objective
+    assert result.notes[-1] == (
+        f"a gradient evaluation saw a lower E_ref than the levels' answer r={5.0:.6g} (1.8 m): "
+        f"answer r={best:.6g} ({answer_E(best):.6g} m)")
+    assert result.evaluations["objective"] == _run(False)[0].evaluations["objective"] + 1
+
+
+def _counted(values_at: dict[float, float], hard_at: dict[float, float]):
+    counted = Counted(lambda r, tau: r, lambda r: hard_at[float(r)], jax.numpy.float64,
+                      value_and_grad=lambda r, tau: (values_at[r] ** 2, 0.0), keep_values=True)
+    for r in values_at:
+        counted.grad(r, 1.0)
+    return counted
+
+
+def test_the_values_seen_are_kept_as_r_and_e_in_the_order_asked():
+    counted = _counted({3.0: 2.0, 1.0: 0.5, 2.0: 1.5}, {})
+    assert counted.values_seen == [(3.0, 2.0), (1.0, 0.5), (2.0, 1.5)] and counted.gradient == 3
+    assert counted.objective == 0  # the value comes with the gradient: no evaluation counted
+    assert Counted(lambda r, tau: r, None, jax.numpy.float64,
+                   value_and_grad=lambda r, tau: (1.0, 0.0)).keep_values is False
+
+
+def test_a_point_is_taken_only_when_the_answer_objective_confirms_it_strictly_lower():
+    notes = []
+    # the best seen (r=1, 0.5) is confirmed at 0.9 < 1.0: taken, at its confirmed value
+    assert _best_seen(_counted({1.0: 0.5, 2.0: 0.7}, {1.0: 0.9}), 4.0, 1.0, "E", notes) == (1.0, 0.9)
+    assert notes == ["a gradient evaluation saw a lower E than the levels' answer r=4 (1 m): answer r=1 (0.9 m)"]
+    # confirmed no lower (equal, or higher): the answer stays, no note
+    assert _best_seen(_counted({1.0: 0.5}, {1.0: 1.0}), 4.0, 1.0, "E", notes) == (4.0, 1.0)
+    assert _best_seen(_counted({1.0: 0.5}, {1.0: 1.2}), 4.0, 1.0, "E", notes) == (4.0, 1.0) and len(notes) == 1
+    # nothing seen below the answer, or only the answer itself: no evaluation spent
+    counted = _counted({1.0: 1.0, 4.0: 0.2}, {})
+    assert _best_seen(counted, 4.0, 1.0, "E", notes) == (4.0, 1.0) and counted.objective == 0
