@@ -263,3 +263,16 @@ def test_under_straight_through_the_sweep_reads_e_soft_off_e_ref_and_every_value
     assert result.solve.E_hard_star < solved[False].E_hard_star
     assert [p.E_soft for p in solved[True].sweep] == pytest.approx([p.E_hard for p in solved[True].sweep], rel=1e-6)
     assert result.programs_run["solve"]["soft"] < soft_programs[True]  # the sweep's three are not run
+
+
+@pytest.mark.parametrize(("threshold_law", "kind", "expected"), [
+    (False, "auto", True), (False, "straight-through", True), (False, "relaxed-reference", False),
+    (False, "mean-field", False), (True, "straight-through", False), (True, "auto", False)])
+def test_only_straight_through_under_a_probabilistic_law_has_e_ref_for_its_value(threshold_law, kind, expected):
+    from diffsense._optimise import _soft_value_is_e_ref
+    from diffsense.sensors import Radar
+    from tests.test_reference import SWERLING, radar_objective
+
+    # under the threshold law straight-through is mean-field: its value is not E_hard
+    E = radar_objective(Radar.from_toml() if threshold_law else SWERLING, kind=kind)
+    assert _soft_value_is_e_ref(E) is expected

@@ -90,3 +90,9 @@ def test_a_point_is_taken_only_when_the_answer_objective_confirms_it_strictly_lo
     # nothing seen below the answer, or only the answer itself: no evaluation spent
     counted = _counted({1.0: 1.0, 4.0: 0.2}, {})
     assert _best_seen(counted, 4.0, 1.0, "E", notes) == (4.0, 1.0) and counted.objective == 0
+
+
+def test_without_a_host_objective_the_value_is_the_soft_objectives_own_and_uncounted():
+    counted = Counted(lambda r, tau: tau * r**2, None, jax.numpy.float64, keep_values=True)
+    assert counted.grad(3.0, 4.0) == 24.0
+    assert counted.values_seen == [(3.0, 6.0)] and (counted.gradient, counted.objective) == (1, 0)
