@@ -192,12 +192,13 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
 
 
 def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progress,
-               on_evaluation: Callable[[dict], None] | None) -> tuple[Objective, Evaluator]:
+               on_evaluation: Callable[[dict], None] | None, figures: bool) -> tuple[Objective, Evaluator]:
     """The problem's objective (built unless given) and its memoising, counting evaluator."""
     say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
         "ground-truth predictions")
     E = objective(problem, predictor=predictor) if E is None else E
-    planned = planned_evaluations(problem, sweep_soft=not _soft_value_is_e_ref(E))
+    # the figures draw E_soft and its slope at the sweep's steps: value-and-gradients either way
+    planned = planned_evaluations(problem, sweep_soft=figures or not _soft_value_is_e_ref(E))
 
     def counted(kind: str, e_m: float, tau: float) -> None:
         if on_evaluation is not None:
@@ -242,7 +243,7 @@ def _optimise_line(problem: Problem, E: Objective | None, predictor: Any, figure
     spec = problem.specs()[name]
     hard_only = problem.estimator.kind == "hard"
     with CompileClock() as clock:
-        E, ev = _evaluator(problem, E, predictor, say, on_evaluation)
+        E, ev = _evaluator(problem, E, predictor, say, on_evaluation, figures)
         on_hard = hard_only or is_deterministic(E.sensor)
         domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
         if domain_note(domain):

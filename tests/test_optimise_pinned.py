@@ -265,6 +265,19 @@ def test_under_straight_through_the_sweep_reads_e_soft_off_e_ref_and_every_value
     assert result.programs_run["solve"]["soft"] < soft_programs[True]  # the sweep's three are not run
 
 
+def test_with_figures_the_plan_counts_the_sweeps_value_and_gradients_which_the_figures_draw():
+    from tests.test_reference import radar_objective
+
+    problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0), extra_curve_points=0,
+                         sensor_config="configs/sensors/laws/radar_swerling1.toml",
+                         estimator=ds.metrics.EstimatorConfig(reference_draws=4), solve=SolveConfig(max_evaluations=9),
+                         scenarios=["sc01"])
+    events = []
+    result = ds.optimise(problem, E=radar_objective(kind="auto", draws=4), on_evaluation=events.append)
+    assert {e["planned"] for e in events} == {planned_evaluations(problem, sweep_soft=True)}
+    assert result.programs_run["figures"]["soft"] >= 3  # the sweep's steps, drawn with their slope
+
+
 @pytest.mark.parametrize(("threshold_law", "kind", "expected"), [
     (False, "auto", True), (False, "straight-through", True), (False, "relaxed-reference", False),
     (False, "mean-field", False), (True, "straight-through", False), (True, "auto", False)])
