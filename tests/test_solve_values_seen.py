@@ -60,7 +60,20 @@ def test_with_it_the_answer_is_the_best_point_the_gradient_saw_confirmed_on_the_
     assert result.notes[-1] == (
         f"a gradient evaluation saw a lower E_ref than the levels' answer r={5.0:.6g} (1.8 m): "
         f"answer r={best:.6g} ({answer_E(best):.6g} m)")
-    assert result.evaluations["objective"] == _run(False)[0].evaluations["objective"] + 1
+    # E_ref at the levels' root, then at the point confirmed; E_soft at r* is E_hard_star, not evaluated
+    assert result.evaluations["objective"] == 2 and result.E_soft_star == result.E_hard_star
+    without = _run(False)[0]
+    assert without.E_soft_star == pytest.approx(1.8) and without.evaluations["objective"] == 2  # E_soft at 5
+
+
+def test_the_confirmation_and_the_polish_stay_inside_the_budget():
+    for budget in (9, 10, 12):
+        result = solve(lambda r, tau: r, lambda r: answer_E(float(r)), (0.0, 10.0), steps=STEPS,
+                       config=SolveConfig(max_evaluations=budget), soft_value_is_answer=True,
+                       value_and_grad=lambda r, tau: (answer_E(r) ** 2, 2.0 * (r - 5.0)))
+        # the polish spends what is left: no evaluation is kept back for E_soft at r*, which is E_hard_star
+        assert result.evaluations["objective"] + result.evaluations["gradient"] == budget
+        assert not any("exceed the budget" in note for note in result.notes)
 
 
 def _counted(values_at: dict[float, float], hard_at: dict[float, float]):
@@ -82,14 +95,17 @@ def test_the_values_seen_are_kept_as_r_and_e_in_the_order_asked():
 def test_a_point_is_taken_only_when_the_answer_objective_confirms_it_strictly_lower():
     notes = []
     # the best seen (r=1, 0.5) is confirmed at 0.9 < 1.0: taken, at its confirmed value
-    assert _best_seen(_counted({1.0: 0.5, 2.0: 0.7}, {1.0: 0.9}), 4.0, 1.0, "E", notes) == (1.0, 0.9)
+    assert _best_seen(_counted({1.0: 0.5, 2.0: 0.7}, {1.0: 0.9}), 4.0, 1.0, "E", notes, 3) == (1.0, 0.9)
     assert notes == ["a gradient evaluation saw a lower E than the levels' answer r=4 (1 m): answer r=1 (0.9 m)"]
     # confirmed no lower (equal, or higher): the answer stays, no note
-    assert _best_seen(_counted({1.0: 0.5}, {1.0: 1.0}), 4.0, 1.0, "E", notes) == (4.0, 1.0)
-    assert _best_seen(_counted({1.0: 0.5}, {1.0: 1.2}), 4.0, 1.0, "E", notes) == (4.0, 1.0) and len(notes) == 1
+    assert _best_seen(_counted({1.0: 0.5}, {1.0: 1.0}), 4.0, 1.0, "E", notes, 2) == (4.0, 1.0)
+    assert _best_seen(_counted({1.0: 0.5}, {1.0: 1.2}), 4.0, 1.0, "E", notes, 2) == (4.0, 1.0) and len(notes) == 1
+    # no evaluation left in the budget (one gradient spent of one): no confirmation, the answer stays
+    counted = _counted({1.0: 0.5}, {1.0: 0.1})
+    assert _best_seen(counted, 4.0, 1.0, "E", notes, 1) == (4.0, 1.0) and counted.objective == 0
     # nothing seen below the answer, or only the answer itself: no evaluation spent
     counted = _counted({1.0: 1.0, 4.0: 0.2}, {})
-    assert _best_seen(counted, 4.0, 1.0, "E", notes) == (4.0, 1.0) and counted.objective == 0
+    assert _best_seen(counted, 4.0, 1.0, "E", notes, 9) == (4.0, 1.0) and counted.objective == 0
 
 
 def test_without_a_host_objective_the_value_is_the_soft_objectives_own_and_uncounted():

@@ -102,11 +102,12 @@ def solve(
     notes: list[str] = []
     levels = _continuation(counted, best.r, (lower, upper), taus, config, xtol, notes)
     r_star, e_hard_star = _on_hard(counted, levels, best, (lo, hi), config, answer_name, notes)
+    # E_soft at a polished r* costs an evaluation kept back, unless it is the answer's own value.
+    kept_back = 0 if soft_value_is_answer else 1
     if soft_value_is_answer:
-        r_star, e_hard_star = _best_seen(counted, r_star, e_hard_star, answer_name, notes)
+        r_star, e_hard_star = _best_seen(counted, r_star, e_hard_star, answer_name, notes, config.max_evaluations)
     spent = counted.objective + counted.gradient
-    # One evaluation stays back for E_soft at a polished r*.
-    probes = min(config.hard_polish, config.max_evaluations - spent - 1)
+    probes = min(config.hard_polish, config.max_evaluations - spent - kept_back)
     if probes > 0:
         r_polished, e_polished = hard_polish_walk(counted, r_star, e_hard_star, lower, upper, probes, xtol)
         if r_polished != r_star:
@@ -117,7 +118,10 @@ def solve(
             )
             r_star, e_hard_star = r_polished, e_polished
     step_hit = next((p for p in sweep_points if p.r == r_star), None)
-    e_soft_star = step_hit.E_soft if step_hit else e_from_e2(counted.e2(r_star, taus[-1]))
+    if step_hit or soft_value_is_answer:
+        e_soft_star = step_hit.E_soft if step_hit else e_hard_star
+    else:
+        e_soft_star = e_from_e2(counted.e2(r_star, taus[-1]))
     total = counted.objective + counted.gradient
     if total > config.max_evaluations:
         notes.append(f"{total} evaluations exceed the budget of {config.max_evaluations}")
@@ -162,11 +166,12 @@ def _continuation(counted: Counted, r0: float, bracket: tuple[float, float], tau
 
 
 def _best_seen(counted: Counted, r_star: float, e_star: float, answer_name: str,
-               notes: list[str]) -> tuple[float, float]:
+               notes: list[str], budget: int) -> tuple[float, float]:
     """(r, E): the best point the gradient evaluations saw where its value, the answer
-    objective's own, is lower than the answer's, confirmed on the answer objective; else the answer."""
+    objective's own, is lower than the answer's, confirmed on the answer objective while the
+    budget has an evaluation left; else the answer."""
     seen = [(e, r) for r, e in counted.values_seen if e < e_star and r != r_star]
-    if not seen:
+    if not seen or counted.objective + counted.gradient >= budget:
         return r_star, e_star
     _, r = min(seen)
     e = counted.hard(r)
