@@ -8,7 +8,9 @@ Strategy:
 3. the final answer is chosen by the HARD objective: the soft optimum is kept when it is at
    least as good as the best step, otherwise the other candidates (earlier levels' optima, the
    best step itself) are compared and `notes` says why the answer is not the soft optimum. So
-   E_hard(r*) <= min over steps of E_hard always holds;
+   E_hard(r*) <= min over steps of E_hard always holds. Where the soft value is the hard
+   objective's own and only its gradient relaxed (`soft_value_is_answer`), every gradient
+   evaluation's point is a candidate too;
 4. a hard polish: a compass search on E_hard around that answer with the evaluations left in
    the budget (at most `SolveConfig.hard_polish`; `reserve_polish` keeps them back from step 2). The soft objective cannot see the hard one's
    fine structure (a vehicle toggling in and out of the FOV at one instant moves E_hard by
