@@ -112,3 +112,12 @@ def test_without_a_host_objective_the_value_is_the_soft_objectives_own_and_uncou
     counted = Counted(lambda r, tau: tau * r**2, None, jax.numpy.float64, keep_values=True)
     assert counted.grad(3.0, 4.0) == 24.0
     assert counted.values_seen == [(3.0, 6.0)] and (counted.gradient, counted.objective) == (1, 0)
+
+
+def test_an_answer_on_a_step_reports_the_sweeps_e_soft_there():
+    # E_hard is lowest at the step 6; the soft objective's root 5 is worse there on E_hard, so the
+    # answer is the step, and E_soft at r* is the sweep's soft value at 6 (sqrt 3), not E_hard (1)
+    result = solve(lambda r, tau: r, lambda r: 1.0 + abs(float(r) - 6.0), (0.0, 10.0), steps=STEPS,
+                   config=CONFIG, value_and_grad=lambda r, tau: (2.0 + (r - 5.0) ** 2, 2.0 * (r - 5.0)))
+    assert result.r_star == 6.0 and result.E_hard_star == 1.0
+    assert result.E_soft_star == pytest.approx(3.0 ** 0.5, rel=1e-12)
