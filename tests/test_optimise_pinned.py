@@ -289,3 +289,15 @@ def test_only_straight_through_under_a_probabilistic_law_has_e_ref_for_its_value
     # under the threshold law straight-through is mean-field: its value is not E_hard
     E = radar_objective(Radar.from_toml() if threshold_law else SWERLING, kind=kind)
     assert _soft_value_is_e_ref(E) is expected
+
+
+def test_under_straight_through_the_default_steps_are_swept_and_the_notes_name_e_ref():
+    from diffsense.solve import default_steps
+    from tests.test_reference import radar_objective
+
+    problem = ds.Problem(params={H: (20.0, 100.0)}, sensor_config="configs/sensors/laws/radar_swerling1.toml",
+                         estimator=ds.metrics.EstimatorConfig(reference_draws=4), solve=SolveConfig(max_evaluations=9),
+                         scenarios=["sc01"])
+    result = ds.optimise(problem, E=radar_objective(kind="auto", draws=4), figures=False)
+    assert [p.r for p in result.solve.sweep] == list(default_steps(20.0, 100.0))  # 20, 36, ..., 100
+    assert result.notes[-1].startswith("a gradient evaluation saw a lower E_ref than the levels' answer")
