@@ -36,7 +36,7 @@ from diffsense.metrics import (
 from diffsense.predictors import CastPredictor, CSLSTMPredictor, load_predictor, with_compute_dtype
 from diffsense.sensors import Weather
 from diffsense.sensors._mount import relevance_stand_ins
-from diffsense.solve import Evaluator, check_interval, check_steps, default_steps, hard_grid_solve, solve, sweep
+from diffsense.solve import Evaluator, default_steps, hard_grid_solve, solve
 from diffsense.tracks import prediction_frames
 
 Progress = Callable[[str], None]
@@ -226,14 +226,9 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
     # Under a probabilistic detection law the sweep, the answer and the polish are judged on
     # E_ref, the expectation the estimator approximates; under the threshold law E_ref is E_hard.
     e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
-    sweep_points, value_is_e_ref = None, _soft_value_is_e_ref(ev.objective)
-    if value_is_e_ref:
-        check_interval(lo, hi)
-        steps = check_steps(default_steps(lo, hi) if problem.steps is None else problem.steps, lo, hi)
-        sweep_points = sweep(e_answer, lambda r, tau: e_answer(r) ** 2, steps)
-    return solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve, sweep_points=sweep_points,
+    return solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
                  value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref",
-                 soft_value_is_answer=value_is_e_ref)
+                 soft_value_is_answer=_soft_value_is_e_ref(ev.objective))
 
 
 def _optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures: bool, say: Progress,

@@ -34,7 +34,7 @@ def _run(value_is_answer: bool):
     asked, hard = [], []
 
     def value_and_grad(r, tau):
-        asked.append(r)
+        asked.append((r, tau))
         return answer_E(r) ** 2, 2.0 * (r - 5.0)
 
     def e_hard(r):
@@ -49,12 +49,19 @@ def _run(value_is_answer: bool):
 def test_without_it_the_answer_is_the_levels_root():
     result, asked, _ = _run(False)
     assert result.r_star == pytest.approx(5.0, abs=1e-6) and result.E_hard_star == pytest.approx(1.8, abs=1e-6)
-    assert min(answer_E(r) for r in asked) < result.E_hard_star  # a better point was seen, and not taken
+    assert min(answer_E(r) for r, _ in asked) < result.E_hard_star  # a better point was seen, and not taken
+    assert asked[:3] == [(0.0, 1.0), (6.0, 1.0), (10.0, 1.0)]  # the sweep's soft values
+
+
+def test_with_it_the_sweep_reads_e_soft_off_e_hard_and_asks_no_soft_value():
+    result, asked, hard = _run(True)
+    assert hard[:3] == list(STEPS) and not {(0.0, 1.0), (10.0, 1.0)} & set(asked)
+    assert [(p.E_hard, p.E_soft) for p in result.sweep] == [(answer_E(r), answer_E(r)) for r in STEPS]
 
 
 def test_with_it_the_answer_is_the_best_point_the_gradient_saw_confirmed_on_the_answer_objective():
     result, asked, hard = _run(True)
-    best = min(set(asked) - set(STEPS), key=answer_E)
+    best = min({r for r, _ in asked} - set(STEPS), key=answer_E)
     assert result.r_star == best and result.E_hard_star == answer_E(best) < 1.8
     assert hard[-1] == best  # confirmed by one more evaluation of the answer objective
     assert result.notes[-1] == (

@@ -76,9 +76,9 @@ def solve(
         answer_name: what the notes call the objective `e_hard` evaluates (the caller knows:
             "E_ref" when it is the expectation over detection draws).
         soft_value_is_answer: the soft objective's value is the answer objective's own, its
-            gradient alone relaxed (straight-through under a probabilistic law): every gradient
-            evaluation's point is then an answer candidate too, and the polish starts from the
-            best of them when it beats the levels' answer.
+            gradient alone relaxed (straight-through under a probabilistic law): the sweep
+            reads E_soft off E_hard, every gradient evaluation's point is an answer candidate
+            too, and the polish starts from the best of them when it beats the levels' answer.
 
     Returns:
         A SolveResult. Raises InputError on a bad interval/steps/config and FloatingPointError
@@ -90,8 +90,12 @@ def solve(
     t0 = time.perf_counter()
     if sweep_points is None:
         grid = check_steps(default_steps(lo, hi) if steps is None else steps, lo, hi)
-        soft = ((lambda r, tau: value_and_grad(float(r), float(tau))[0]) if value_and_grad is not None
-                else (lambda r, tau: e2_soft(host_array(r, dtype), host_array(tau, dtype))))
+        if soft_value_is_answer:
+            soft = None  # E_soft at a step is its E_hard: no soft evaluation for the same number
+        elif value_and_grad is not None:
+            soft = lambda r, tau: value_and_grad(float(r), float(tau))[0]
+        else:
+            soft = lambda r, tau: e2_soft(host_array(r, dtype), host_array(tau, dtype))
         sweep_points = sweep(lambda r: e_hard(host_array(r, dtype)), soft, grid, tau=taus[-1])
     sweep_points = tuple(sweep_points)
     t1 = time.perf_counter()
@@ -120,8 +124,10 @@ def solve(
             )
             r_star, e_hard_star = r_polished, e_polished
     step_hit = next((p for p in sweep_points if p.r == r_star), None)
-    if step_hit or soft_value_is_answer:
-        e_soft_star = step_hit.E_soft if step_hit else e_hard_star
+    if step_hit:
+        e_soft_star = step_hit.E_soft
+    elif soft_value_is_answer:
+        e_soft_star = e_hard_star
     else:
         e_soft_star = e_from_e2(counted.e2(r_star, taus[-1]))
     total = counted.objective + counted.gradient

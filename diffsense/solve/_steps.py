@@ -83,7 +83,7 @@ def check_steps(steps: Sequence[float], lo: float, hi: float) -> np.ndarray:
 
 def sweep(
     e_hard: Callable[[float], float],
-    e2_soft: Callable[[float, float], float],
+    e2_soft: Callable[[float, float], float] | None,
     steps: Sequence[float],
     *,
     tau: float = 1.0,
@@ -91,12 +91,13 @@ def sweep(
     """Evaluate E_hard(r) and E_soft(r, tau) = sqrt(e2_soft(r, tau)) at every step.
 
     `e_hard(r)` returns E in metres; `e2_soft(r, tau)` returns E^2 in m^2. Costs len(steps)
-    hard and len(steps) soft objective evaluations.
+    hard and len(steps) soft objective evaluations. `e2_soft` None: the soft value is the hard
+    objective's own (straight-through), so E_soft is E_hard and no soft evaluation is made.
     """
     points = []
     for r in np.asarray(steps, dtype=np.float64).reshape(-1):
         e_h = float(e_hard(float(r)))
-        e_s = math.sqrt(max(float(e2_soft(float(r), tau)), 0.0))
+        e_s = e_h if e2_soft is None else math.sqrt(max(float(e2_soft(float(r), tau)), 0.0))
         points.append(SweepPoint(r=float(r), E_hard=e_h, E_soft=e_s))
     return tuple(points)
 
