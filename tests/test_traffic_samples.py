@@ -200,8 +200,9 @@ def test_same_seed_same_samples_bit_for_bit(dataset):
     assert not np.array_equal(generate_samples(CFG, NUM, jax.random.key(12))["hist"], dataset["hist"])
 
 
-@pytest.mark.slow
 def test_samples_do_not_depend_on_the_batching(dataset):
+    # Batches of two over four simulations: the fast tests elsewhere batch one at a time, where a
+    # batch launched at every simulation instead of every second one cannot show.
     cfg = small_config(simulations_per_shard=2)
     other = generate_samples(cfg, NUM, jax.random.key(11))
     for k in dataset:
