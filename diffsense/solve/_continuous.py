@@ -90,13 +90,7 @@ def solve(
     t0 = time.perf_counter()
     if sweep_points is None:
         grid = check_steps(default_steps(lo, hi) if steps is None else steps, lo, hi)
-        if soft_value_is_answer:
-            soft = None  # E_soft at a step is its E_hard: no soft evaluation for the same number
-        elif value_and_grad is not None:
-            soft = lambda r, tau: value_and_grad(float(r), float(tau))[0]
-        else:
-            soft = lambda r, tau: e2_soft(host_array(r, dtype), host_array(tau, dtype))
-        sweep_points = sweep(lambda r: e_hard(host_array(r, dtype)), soft, grid, tau=taus[-1])
+        sweep_points = _sweep(e2_soft, e_hard, grid, dtype, taus[-1], value_and_grad, soft_value_is_answer)
     sweep_points = tuple(sweep_points)
     t1 = time.perf_counter()
 
@@ -108,21 +102,13 @@ def solve(
     notes: list[str] = []
     levels = _continuation(counted, best.r, (lower, upper), taus, config, xtol, notes)
     r_star, e_hard_star = _on_hard(counted, levels, best, (lo, hi), config, answer_name, notes)
-    # E_soft at a polished r* costs an evaluation kept back, unless it is the answer's own value.
-    kept_back = 0 if soft_value_is_answer else 1
     if soft_value_is_answer:
         r_star, e_hard_star = _best_seen(counted, r_star, e_hard_star, answer_name, notes, config.max_evaluations)
-    spent = counted.objective + counted.gradient
-    probes = min(config.hard_polish, config.max_evaluations - spent - kept_back)
+    # E_soft at a polished r* costs an evaluation kept back, unless it is the answer's own value.
+    kept_back = 0 if soft_value_is_answer else 1
+    probes = min(config.hard_polish, config.max_evaluations - counted.objective - counted.gradient - kept_back)
     if probes > 0:
-        r_polished, e_polished = hard_polish_walk(counted, r_star, e_hard_star, lower, upper, probes, xtol)
-        if r_polished != r_star:
-            notes.append(
-                f"hard polish: r={r_star:.6g} -> {r_polished:.6g} lowered {answer_name} from "
-                f"{e_hard_star:.6g} to {e_polished:.6g} m (the soft objective cannot resolve "
-                f"differences this fine)"
-            )
-            r_star, e_hard_star = r_polished, e_polished
+        r_star, e_hard_star = _polish(counted, r_star, e_hard_star, (lower, upper), probes, xtol, answer_name, notes)
     step_hit = next((p for p in sweep_points if p.r == r_star), None)
     if step_hit:
         e_soft_star = step_hit.E_soft
@@ -140,6 +126,32 @@ def solve(
         levels=tuple(levels), notes=tuple(notes), interval=(lo, hi),
         wall_s={"sweep": t1 - t0, "solve": time.perf_counter() - t1},
     )
+
+
+def _sweep(e2_soft, e_hard, grid, dtype, tau: float, value_and_grad, soft_value_is_answer: bool
+           ) -> tuple[SweepPoint, ...]:
+    """The stepped sweep: E_hard at every step, and E_soft at `tau` beside it unless it is the
+    same number (`soft_value_is_answer`)."""
+    if soft_value_is_answer:
+        soft = None
+    elif value_and_grad is not None:
+        soft = lambda r, tau: value_and_grad(float(r), float(tau))[0]
+    else:
+        soft = lambda r, tau: e2_soft(host_array(r, dtype), host_array(tau, dtype))
+    return sweep(lambda r: e_hard(host_array(r, dtype)), soft, grid, tau=tau)
+
+
+def _polish(counted: Counted, r_star: float, e_star: float, bracket: tuple[float, float], probes: int,
+            xtol: float, answer_name: str, notes: list[str]) -> tuple[float, float]:
+    """(r, E): the hard polish's answer from (r_star, e_star) inside the bracket; `notes` says
+    when it moved."""
+    r, e = hard_polish_walk(counted, r_star, e_star, *bracket, probes, xtol)
+    if r != r_star:
+        notes.append(
+            f"hard polish: r={r_star:.6g} -> {r:.6g} lowered {answer_name} from "
+            f"{e_star:.6g} to {e:.6g} m (the soft objective cannot resolve differences this fine)"
+        )
+    return r, e
 
 
 def _continuation(counted: Counted, r0: float, bracket: tuple[float, float], taus: tuple[float, ...],
