@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import jax
@@ -186,3 +187,51 @@ def test_a_pareto_sweep_builds_its_objective_seeds_its_solves_and_says_each_lamb
                                 f"cost {design.cost:.2f}, {design.counts['soft']} value-and-gradient + "
                                 f"{design.counts['hard']} hard")
     assert len(lines) == 3
+
+
+def test_under_a_random_law_answers_are_judged_on_e_ref():
+    problem = _problem(sensor_config=SWERLING)
+    E = _toy_objective(problem)
+    ev, fns, _ = _functions(problem, E, None, planned=1)
+    x = [60.0, 1920.0]
+    assert fns.e_hard(x) == ev.e_reference(x) and fns.e_hard(x) != ev.e_hard(x)
+
+
+def _costs_file(tmp_path) -> str:
+    """configs/costs.toml in dollars, the radar's base 45 higher."""
+    text = (Path(__file__).resolve().parents[1] / "configs" / "costs.toml").read_text()
+    assert text.count('currency = "EUR"') == 1 and text.count("base = 45.0") == 1
+    path = tmp_path / "costs.toml"
+    path.write_text(text.replace('currency = "EUR"', 'currency = "USD"').replace("base = 45.0", "base = 90.0"))
+    return str(path)
+
+
+def test_the_box_functions_price_a_design_with_the_problems_cost_model(tmp_path):
+    E = _toy_objective(_problem())
+    x = [60.0, 1920.0]
+    default = _functions(_problem(), E, None, planned=1)[1].cost(x)[0]
+    priced = _functions(_problem(costs=_costs_file(tmp_path)), E, None, planned=1)[1].cost(x)[0]
+    assert priced == pytest.approx(default + 45.0, rel=1e-12)
+
+
+def test_a_box_solve_is_seeded_by_the_problem(monkeypatch):
+    from diffsense import _suite_solve
+
+    configs = []
+    solve = _suite_solve.box_solve
+    monkeypatch.setattr(_suite_solve, "box_solve",
+                        lambda fns, params, config, **kw: configs.append(config) or solve(fns, params, config, **kw))
+    problem = _problem(box=BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3), seed=7)
+    ds.optimise(problem, E=_toy_objective(problem))
+    assert [c.seed for c in configs] == [7]
+
+
+def test_a_front_is_priced_in_the_cost_models_currency(monkeypatch, tmp_path):
+    from diffsense import _optimise
+
+    problem = _problem(box=BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3),
+                       costs=_costs_file(tmp_path))
+    E = _toy_objective(problem)
+    monkeypatch.setattr(_optimise, "objective", lambda p, predictor=None: E)
+    front = pareto(problem, [0.0, 0.01], predictor="toy")
+    assert front.currency == "USD" and front.to_dict()["currency"] == "USD"
