@@ -4,9 +4,7 @@ one-parameter solve into its Result (on the toy pipeline: one tiny scene, three 
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
-import numpy as np
 import pytest
 
 import diffsense as ds
@@ -166,10 +164,11 @@ def test_sensitivity_is_asked_for_at_the_answer_and_kept(solved, monkeypatch):
                         lambda p, out, theta, E: asked.append((p, out.r_star, theta)) or {"rain_mm_h": {H: 0.5}})
     monkeypatch.setattr(ds._optimise, "_optimise_line", lambda *a: (result, "E"))
     lines = []
-    out = ds.optimise(problem, sensitivity=("rain_mm_h",), progress=lines.append)
-    assert asked == [(problem, result.r_star, ("rain_mm_h",))] and out.sensitivity == {"rain_mm_h": {H: 0.5}}
+    theta = ("rain_mm_h", "fog_visibility_m")
+    out = ds.optimise(problem, sensitivity=theta, progress=lines.append)
+    assert asked == [(problem, result.r_star, theta)] and out.sensitivity == {"rain_mm_h": {H: 0.5}}
     assert out.r_star == result.r_star
-    assert lines == ["radar: dr*/dtheta for rain_mm_h (implicit function theorem)"]
+    assert lines == ["radar: dr*/dtheta for rain_mm_h, fog_visibility_m (implicit function theorem)"]
 
 
 @pytest.mark.parametrize("distributed, kwargs", [(True, {}), ({"process_id": 1, "num_processes": 2}, None)])
@@ -186,21 +185,6 @@ def test_a_distributed_run_is_joined_first(monkeypatch, distributed, kwargs):
     with pytest.raises(Joined) as joined:
         ds.optimise(ds.Problem(), distributed=distributed)
     assert joined.value.args[0] == (distributed if kwargs is None else kwargs)
-
-
-def test_the_objective_of_a_problem_is_its_scenes_from_the_seeds_first_key_in_float64():
-    from diffsense.metrics import speed_shifted_scenes
-    from diffsense.sensors._mount import relevance_stand_ins
-
-    toy = ToyPredictor(jnp.asarray(TOY_GAIN))
-    problem = ds.Problem(scenarios=["sc01"], variants=2, seed=3, prediction_stride_frames=40, predictor=toy)
-    E = ds.objective(problem)
-    assert E.dtype == jnp.float64 and E.scenario_names == ("sc01",)
-    scenes_key = jax.random.split(jax.random.PRNGKey(3))[0]  # [1] draws the sensors' noise
-    expected = speed_shifted_scenes(("sc01",), 2, scenes_key, spec=toy.spec,  # variant 1 is randomised
-                                    sensors=[problem.make_sensor(), *relevance_stand_ins(problem.params)],
-                                    stride_frames=40, dtype=jnp.float64)[0].base
-    np.testing.assert_array_equal(np.asarray(E.data.scenes.x_m), np.asarray(expected.x_m))
 
 
 def test_float64_switches_jax_to_64_bits_in_a_fresh_process():
