@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from diffsense.solve import DenseGrid, basin_check, hard_grid_solve
-from tests._analytic_objectives import HI, LO, bowl
+from diffsense.solve import DenseGrid, SolveConfig, basin_check, hard_grid_solve, solve
+from tests._analytic_objectives import HI, LO, bowl, dip_at
 
 
 def test_hard_grid_solve_reports_a_hard_only_search():
@@ -109,3 +109,13 @@ def test_soft_e_below_one_metre_is_its_square_root():
 
     res = solve(e2, lambda r: math.sqrt(0.25 + (float(r) - 1.3) ** 2), (LO, HI))
     assert res.E_soft_star == pytest.approx(0.5, abs=1e-5)
+
+
+def test_the_hard_polish_note_names_the_answer_objective_and_both_points():
+    e2, eh = dip_at(1.33, center=1.3, penalty=0.05)
+    plain = solve(e2, eh, (LO, HI), config=SolveConfig(hard_polish=0), answer_name="E_ref")
+    res = solve(e2, eh, (LO, HI), answer_name="E_ref")
+    (note,) = [n for n in res.notes if n.startswith("hard polish")]
+    assert note == (f"hard polish: r={plain.r_star:.6g} -> {res.r_star:.6g} lowered E_ref from "
+                    f"{plain.E_hard_star:.6g} to {res.E_hard_star:.6g} m (the soft objective cannot resolve "
+                    f"differences this fine)")
