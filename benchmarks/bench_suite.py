@@ -33,10 +33,10 @@ best answer to the best point any run found. Needs the
 confidence camera). Every method is then judged by E_ref, the mean of the hard objective over
 --draws detection draws with common random numbers, in place of the hard E; the gradient
 descends relaxed-reference (the default estimator for several parameters under such laws), whose
-relaxed draws are E_ref's own. A best found on E_ref can owe part of its value to its draws, and
-a method that evaluates more points has more chances of such luck, so each run's best point is
-judged again on --judge-draws draws independent of E_ref's (`Objective.reference`'s indices from
---draws on): the "judged" column.
+relaxed draws are E_ref's own. A best found on E_ref can owe part of its value to its draws (the
+more so the lower a method gets on them), so each run's best point is judged again on
+--judge-draws draws independent of E_ref's (`Objective.reference`'s indices from --draws on): the
+"judged" column.
 """
 
 from __future__ import annotations
