@@ -72,3 +72,36 @@ def test_a_refused_checkpoint_is_named_in_the_message(tmp_path):
     with pytest.raises(InputError) as info:
         load_predictor(path)
     assert str(info.value) == f"{path}: op.bias has shape (4,), expected (5,)"
+
+
+def test_an_untrained_manoeuvre_predictor_has_six_modes():
+    predictor = init_predictor(maneuvers=True)
+    assert predictor.maneuvers is True and "op_lat.weight" in state_dict_from_model(predictor.model())
+
+
+def test_the_default_predictor_is_the_shipped_weight_file_with_its_cards_rmse():
+    from diffsense.predictors._weights import DEFAULT_WEIGHTS, read_card
+
+    default, named = load_predictor(), load_predictor(DEFAULT_WEIGHTS)
+    a, b = (state_dict_from_model(p.model()) for p in (default, named))
+    assert sorted(a) == sorted(b) and all(np.array_equal(a[k], b[k]) for k in a)
+    card = tuple(float(v) for v in read_card(DEFAULT_WEIGHTS)["validation"]["rmse_m"]["cslstm"])
+    assert default.validation_rmse_m == card == named.validation_rmse_m and len(card) == 5
+
+
+def test_the_mean_defaults_to_the_most_probable_manoeuvre_and_keeps_float32():
+    from diffsense.predictors import predict_mean_dense
+
+    predictor = init_predictor(maneuvers=True, seed=2)
+    hist = jnp.asarray(RNG.normal(size=(3, 16, 2)), jnp.float32)
+    nbr_hist = jnp.asarray(RNG.normal(size=(3, 2, 16, 2)) * 5.0, jnp.float32)
+    slot, weight = jnp.asarray([[1, 20], [7, 0], [38, 13]]), jnp.ones((3, 2), jnp.float32)
+    got = predict_mean(predictor, hist, nbr_hist, slot, weight)
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(predict_mean(predictor, hist, nbr_hist, slot, weight,
+                                                                           "most_probable")))
+    nbrs = jnp.asarray(RNG.normal(size=(3, 39, 16, 2)) * 5.0, jnp.float32)
+    occupancy = jnp.asarray(RNG.uniform(size=(3, 39)))  # float64: the mean keeps the histories' float32
+    dense = predict_mean_dense(predictor, hist, nbrs, occupancy)
+    assert got.dtype == dense.dtype == jnp.float32
+    np.testing.assert_array_equal(np.asarray(dense), np.asarray(predict_mean_dense(predictor, hist, nbrs, occupancy,
+                                                                                   "most_probable")))
