@@ -8,23 +8,42 @@
     result = ds.optimise(problem)                              # the main job; result.r_star
     front = ds.pareto(ds.Problem.from_suite("configs/suites/radar_camera_d4.toml"))  # E vs cost
 
-Pipeline (one subpackage per stage, data flowing one way):
-    scene -> sensors -> tracks -> predictors -> metrics -> solve -> report
-The command-line faces live in `diffsense.cli`.
+Packages, data flowing one way (docs/architecture.md):
+    scene -> sensors -> tracks -> predictors -> metrics -> solve -> study -> report -> cli
+with `runtime` (and `config`) beneath them all.
 """
 
-__version__ = "0.2.0"
+import sys
+import types
 
 from diffsense import predictors, sensors
-from diffsense._optimise import objective, optimise
-from diffsense._problem import Problem
-from diffsense._result import Result
-from diffsense._sensitivity import sensitivity
-from diffsense._suite_solve import ParetoFront, pareto
-from diffsense.errors import InputError
 from diffsense.metrics import Objective
+from diffsense.runtime import InputError, __version__
+from diffsense.study import (
+    ParetoFront,
+    Problem,
+    Result,
+    objective,
+    optimise,
+    pareto,
+    sensitivity,
+)
 
 __all__ = [
     "InputError", "Objective", "ParetoFront", "Problem", "Result", "__version__", "objective", "optimise",
     "pareto", "predictors", "sensitivity", "sensors",
 ]
+
+
+class _Package(types.ModuleType):
+    """This package, with one rule: importing the `python -m diffsense.optimise` module (the main
+    job's command line) leaves `diffsense.optimise` the function. Python binds a submodule to its
+    parent's attribute of the same name once it is imported; that binding is refused here."""
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name == "optimise" and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

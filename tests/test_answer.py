@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from diffsense._answer import explain, near_optimal
+from diffsense.solve._answer import explain, near_optimal
 
 
 def test_an_interior_sharp_minimum_has_no_flags():

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.solve._box import BoxConfig, box_solve
 from diffsense.solve._pareto import pareto_sweep
 from diffsense.solve._box_space import halton

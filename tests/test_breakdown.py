@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense._breakdown import breakdown, tracked_summary
+from diffsense.metrics._breakdown import breakdown, tracked_summary
 from diffsense.tracks import build_inputs
 from tests._toy_pipeline import toy_objective
 

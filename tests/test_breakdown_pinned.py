@@ -10,8 +10,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from diffsense._breakdown import _rms, breakdown, tracked_summary
-from diffsense._domain import DOMAIN_FACTOR, domain_check, domain_note
+from diffsense.metrics._breakdown import _rms, breakdown, tracked_summary
+from diffsense.study._domain import DOMAIN_FACTOR, domain_check, domain_note
 
 # Three variants of two scenarios ("a": variants 0 and 2, "b": variant 1), two instants each.
 SCENARIO = np.array([0, 1, 0])

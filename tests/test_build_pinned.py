@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.sensors import Weather
 from diffsense.tracks import prediction_frames

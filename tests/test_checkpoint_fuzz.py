@@ -35,7 +35,7 @@ for name in ("diffsense", "diffsense.predictors"):
     mod.__path__ = [os.path.join(root, *name.split("."))]
     sys.modules[name] = mod
 import numpy as np
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.predictors._checkpoint import read_state_dict
 resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 for path in sys.stdin.read().split("\n"):

@@ -15,7 +15,7 @@ import _torch_zip
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.predictors import _checkpoint as ck
 from diffsense.predictors import read_state_dict
 from diffsense.predictors._checkpoint import _Refused

@@ -17,7 +17,7 @@ import diffsense as ds
 import diffsense.predictors
 from diffsense import _distributed, _optimise, cli, report
 from diffsense.cli import optimise
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 
 class _Progress:

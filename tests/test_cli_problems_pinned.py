@@ -13,7 +13,7 @@ import pytest
 from diffsense.cli._problems import _number_list, _param_boxes, problems
 from diffsense.cli._suite import pareto_lambdas, suite_fields
 from diffsense.cli.optimise import _parser
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -14,7 +14,7 @@ import threading
 import pytest
 
 from diffsense.cli import _run
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 
 def _exit(main, capsys, **kwargs) -> tuple[int, str]:
@@ -178,7 +178,7 @@ def configured(monkeypatch):
     """Records what setup_jax sets instead of setting it."""
     import jax
 
-    from diffsense import _executables
+    from diffsense.runtime import _executables
 
     got = {}
     monkeypatch.setattr(jax.config, "update", lambda name, value: got.__setitem__(name, value))

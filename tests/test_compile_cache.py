@@ -48,7 +48,7 @@ def test_the_clock_counts_programs_lowered_and_compiled():
     import jax
     import numpy as np
 
-    from diffsense._timing import CompileClock
+    from diffsense.runtime._timing import CompileClock
 
     def shifted(x):
         return x * 3.0 + 1.25

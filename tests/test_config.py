@@ -8,7 +8,7 @@ from typing import Literal
 import pytest
 
 from diffsense.config import from_dict, load, parse_toml, replace, to_dict
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 
 @dataclasses.dataclass(frozen=True)

@@ -19,7 +19,7 @@ from diffsense.config._defaults import (
     merge,
 )
 from diffsense.config._schema import _convert, _type_name
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from tests.test_config import Inner, Outer
 
 ROOT = Path(__file__).resolve().parents[1]

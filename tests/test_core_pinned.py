@@ -11,7 +11,7 @@ import math
 
 import pytest
 
-from diffsense._answer import (
+from diffsense.solve._answer import (
     BOUND_FRACTION,
     FLAT_FRACTION,
     NEAR_OPTIMAL_ABS_M,
@@ -19,8 +19,8 @@ from diffsense._answer import (
     explain,
     near_optimal,
 )
-from diffsense._param_names import _finite, _resolve_params, resolve_name
-from diffsense.errors import InputError
+from diffsense.sensors._names import _finite, _resolve_params, resolve_name
+from diffsense.runtime._errors import InputError
 from diffsense.sensors import Camera, Radar, Suite
 
 

@@ -7,7 +7,7 @@ import jax
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.metrics._cost import cost_breakdown, load_costs, make_cost
 from diffsense.sensors import Camera, Radar
 from diffsense.sensors._fusion import Suite

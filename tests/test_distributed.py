@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = """
 import json, sys, jax
 jax.config.update("jax_enable_x64", True)
-from diffsense._distributed import initialize
+from diffsense.runtime._distributed import initialize
 pid, n, address = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 if n > 1:
     initialize(address, n, pid)

@@ -1,4 +1,4 @@
-"""`diffsense._distributed` pinned in one process: where `initialize` takes the coordinator, process
+"""`diffsense.runtime._distributed` pinned in one process: where `initialize` takes the coordinator, process
 count and id from (arguments, then JAX's environment variables), its refusals by whole message,
 a second call, the collectives backend it sets, the writer, and `to_host`'s leaves. The join
 itself is replaced by a recorder; tests/test_distributed.py joins two real processes."""
@@ -10,8 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense._distributed import initialize, is_writer, to_host
-from diffsense.errors import InputError
+from diffsense.runtime._distributed import initialize, is_writer, to_host
+from diffsense.runtime._errors import InputError
 
 _VARS = ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
 

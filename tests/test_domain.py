@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import diffsense as ds
-from diffsense._domain import DOMAIN_FACTOR, domain_check, domain_note
+from diffsense.study._domain import DOMAIN_FACTOR, domain_check, domain_note
 from tests.conftest import ROOT
 
 

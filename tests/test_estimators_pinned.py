@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms, relaxed_bernoulli
 
 

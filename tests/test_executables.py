@@ -1,4 +1,4 @@
-"""Compiled programs kept on disk (`diffsense._executables`): loaded without tracing, the same
+"""Compiled programs kept on disk (`diffsense.runtime._executables`): loaded without tracing, the same
 bits as a compile, one per static value and shape, and safe fallbacks."""
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from jax import monitoring
 
-from diffsense import _executables
-from diffsense._executables import call, keep_in
+from diffsense.runtime import _executables
+from diffsense.runtime._executables import call, keep_in
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -134,7 +134,7 @@ _SCRIPT = textwrap.dedent("""
     jax.config.update("jax_compilation_cache_dir", sys.argv[1])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    from diffsense._executables import call, keep_in
+    from diffsense.runtime._executables import call, keep_in
     def first(x): return jnp.sum(jnp.where(jnp.arange(7) < x, x, 0.0))
     def second(x): return jnp.sum(jnp.where(jnp.arange(9) > x, 2 * x, 1.0))
     keep_in(Path(sys.argv[2]))

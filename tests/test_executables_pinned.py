@@ -1,4 +1,4 @@
-"""`diffsense._executables` pinned: the key's recipe and what changes it, the exact text of static
+"""`diffsense.runtime._executables` pinned: the key's recipe and what changes it, the exact text of static
 values, which arguments are never stored, the file's name and how it is written, loading as an
 event the compile clock counts, and the programs held in memory."""
 
@@ -22,8 +22,8 @@ from jax import monitoring
 from jax._src import compiler
 
 import diffsense
-from diffsense import _executables as ex
-from diffsense._executables import call, keep_in
+from diffsense.runtime import _executables as ex
+from diffsense.runtime._executables import call, keep_in
 from tests.test_executables import _bowl, _files, _Holder
 
 _events: list[tuple[str, str]] = []

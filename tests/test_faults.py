@@ -119,7 +119,7 @@ def test_interrupt_during_the_solve_leaves_the_previous_set(tmp_path, weights, s
 @pytest.mark.slow
 def test_answers_say_when_they_press_on_a_bound_or_lie_on_a_flat(tmp_path):
     # The shipped weights over an interval as wide as the domain: the flags in result.json must
-    # agree with the near-optimal set and r* (see diffsense/_answer.py for the rules).
+    # agree with the near-optimal set and r* (see diffsense/solve/_answer.py for the rules).
     out = tmp_path / "wide"
     proc = _cli(["--scenarios", "sc01", "--variants", "1", "--interval", "0.01", "360", "--out", str(out), "--quiet"],
                 timeout=900)

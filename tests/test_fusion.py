@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from test_sensor_scenes import make_scene
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import CAR, TRUCK
 from diffsense.sensors import CLEAR, Camera, Radar, Weather
 from diffsense.sensors._fusion import Suite, fuse

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.solve import DenseGrid, basin_check, default_steps, dense_grid_search, hard_grid_solve
 
 

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from diffsense import _io
+from diffsense.runtime import _io
 from diffsense.cli._run import run
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 MANIFEST = _io.MANIFEST
@@ -32,7 +32,7 @@ SCRIPT = textwrap.dedent(
         mod = types.ModuleType(name)             # __init__ files (jax, flax: seconds per child)
         mod.__path__ = [os.path.join(sys.argv[3], *name.split("."))]
         sys.modules[name] = mod
-    from diffsense import _io
+    from diffsense.runtime import _io
     from diffsense.cli._run import run
 
     mode, folder = sys.argv[1], Path(sys.argv[2])

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from diffsense import _io
-from diffsense.errors import InputError
+from diffsense.runtime import _io
+from diffsense.runtime._errors import InputError
 
 MANIFEST = _io.MANIFEST
 

@@ -1,4 +1,4 @@
-"""What the one-parameter main job reports beside r* (`diffsense._line_report`), pinned on a
+"""What the one-parameter main job reports beside r* (`diffsense.study._line_report`), pinned on a
 stand-in evaluator whose E, dE^2/dr, hard evaluations and reference are written out here: the
 curves the figures draw, the breakdowns, the dense reference check and result.json's
 "reference". Only the first-variant gather of a tiny scene is compiled."""
@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense._line_report import (
+from diffsense.study._line_report import (
     breakdowns,
     curves,
     dense_check,

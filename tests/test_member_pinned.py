@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from test_sensor_scenes import make_scene
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.sensors._member import Covariance, line_of_sight_covariance, member_view
 from diffsense.sensors._suite import Radar
 from diffsense.sensors._weather import Weather

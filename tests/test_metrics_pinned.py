@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.metrics._cost import CostTerm, SensorCost, cost_breakdown, load_costs
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_classes, coverage_parts, p_tracked, target_window
 from diffsense.scene import TARGET_INDEX

@@ -23,8 +23,8 @@ import jax
 import numpy as np
 import pytest
 
-from diffsense._problem import Problem
-from diffsense.errors import InputError
+from diffsense.study._problem import Problem
+from diffsense.runtime._errors import InputError
 from diffsense.metrics import EstimatorConfig, recorded_scenes, simulate_scenes, speed_shifted_scenes
 from diffsense.metrics import _build
 from diffsense.metrics._build import _pad_vehicles

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.metrics import EstimatorConfig
 from diffsense.solve import Evaluator
 from tests._toy_pipeline import toy_objective

@@ -153,7 +153,7 @@ def test_hard_estimator_searches_the_best_bracket(weights, tmp_path, capsys):
 
 def test_reserve_polish_config_is_the_default_but_for_that_key():
     from diffsense import config as cfgio
-    from diffsense._settings import load_settings
+    from diffsense.study._settings import load_settings
 
     default = load_settings()
     reserve = load_settings(ROOT / "configs/optimise/reserve_polish.toml")

@@ -8,8 +8,8 @@ import jax.numpy as jnp
 import pytest
 
 import diffsense as ds
-from diffsense._domain import domain_note
-from diffsense._optimise import (
+from diffsense.study._domain import domain_note
+from diffsense.study._optimise import (
     _config,
     _in_dtype,
     memory_estimate_bytes,
@@ -134,7 +134,7 @@ def test_progress_lines_and_events(solved):
 
 
 def test_a_cost_weight_makes_one_parameter_a_box_solve(monkeypatch):
-    from diffsense import _suite_solve
+    from diffsense.study import _box_job as _suite_solve
 
     called = []
     monkeypatch.setattr(_suite_solve, "optimise_box", lambda problem, *a: called.append(problem) or "box")
@@ -156,7 +156,7 @@ def test_the_hard_estimator_searches_the_steps_it_is_given():
 
 
 def test_sensitivity_is_asked_for_at_the_answer_and_kept(solved, monkeypatch):
-    from diffsense import _sensitivity
+    from diffsense.study import _sensitivity
 
     problem, result, _, _ = solved
     asked = []
@@ -173,7 +173,7 @@ def test_sensitivity_is_asked_for_at_the_answer_and_kept(solved, monkeypatch):
 
 @pytest.mark.parametrize("distributed, kwargs", [(True, {}), ({"process_id": 1, "num_processes": 2}, None)])
 def test_a_distributed_run_is_joined_first(monkeypatch, distributed, kwargs):
-    from diffsense import _distributed
+    from diffsense.runtime import _distributed
 
     class Joined(Exception):
         pass
@@ -192,7 +192,7 @@ def test_float64_switches_jax_to_64_bits_in_a_fresh_process():
     import subprocess
     import sys
 
-    code = ("import jax; from diffsense._optimise import _precision; "
+    code = ("import jax; from diffsense.study._optimise import _precision; "
             "print(jax.config.jax_enable_x64, _precision(False).__name__, jax.config.jax_enable_x64, "
             "_precision(True).__name__, jax.config.jax_enable_x64)")
     env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
@@ -266,7 +266,7 @@ def test_with_figures_the_plan_counts_the_sweeps_value_and_gradients_which_the_f
     (False, "auto", True), (False, "straight-through", True), (False, "relaxed-reference", False),
     (False, "mean-field", False), (True, "straight-through", False), (True, "auto", False)])
 def test_only_straight_through_under_a_probabilistic_law_has_e_ref_for_its_value(threshold_law, kind, expected):
-    from diffsense._optimise import _soft_value_is_e_ref
+    from diffsense.study._optimise import _soft_value_is_e_ref
     from diffsense.sensors import Radar
     from tests.test_reference import SWERLING, radar_objective
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense._io import output_set
+from diffsense.runtime._io import output_set
 from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.report import PARETO_FILES, pareto_table, plot_pareto, write_pareto
 from diffsense.solve import BoxConfig

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import _torch_zip
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.predictors import (
     load_predictor,
     load_weights,

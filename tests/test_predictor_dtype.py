@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.predictors import CastPredictor, PredictorInputs, init_predictor, predict_mean, with_compute_dtype
 
 

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import pytest
 
 import diffsense as ds
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.metrics import EstimatorConfig
 from diffsense.sensors import Suite, make_sensor
 from tests._toy_pipeline import ToySensor

@@ -1,4 +1,4 @@
-"""`diffsense._random` draws exactly what `jax.random` draws, for every shape the project uses and
+"""`diffsense.runtime._random` draws exactly what `jax.random` draws, for every shape the project uses and
 under both threefry modes, so that drawing flat changes no number anywhere."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import diffsense
-from diffsense import _random
+from diffsense.runtime import _random
 
 SHAPES = [(), (7,), (2, 21, 5), (3, 2, 4, 5)]
 # Every shape in float64 under the default (partitionable) threefry; float32 and the other mode

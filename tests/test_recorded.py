@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import _recorded_files as files
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import BACKGROUND, CAR, EGO, LEAD, TARGET, TARGET_LEAD, TRUCK, load_highd, load_ngsim, load_recorded
 from diffsense.scene._highd import read_highd
 from diffsense.scene._ngsim import read_ngsim

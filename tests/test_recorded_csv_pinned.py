@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import _recorded_csv
 from diffsense.scene._recorded_csv import (
     _fast_numbers,

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import CAR, TRUCK, load_highd, load_ngsim
 from diffsense.scene._highd import read_highd
 from diffsense.scene._ngsim import read_ngsim

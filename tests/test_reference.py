@@ -14,8 +14,8 @@ import pytest
 
 from diffsense import config as cfg
 from diffsense import sensors as sensor
-from diffsense._line_report import dense_check
-from diffsense.errors import InputError
+from diffsense.study._line_report import dense_check
+from diffsense.runtime._errors import InputError
 from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.metrics._reference import reference_uniforms
 from diffsense.sensors._laws import RadarDetection

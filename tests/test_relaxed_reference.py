@@ -139,7 +139,7 @@ def test_the_solver_notes_name_the_answer_objective_it_is_given():
 
 def test_optimise_judges_the_answer_on_the_reference_and_reports_it(monkeypatch):
     import diffsense as ds
-    from diffsense import _optimise
+    from diffsense.study import _optimise
     from diffsense.metrics import EstimatorConfig
     from diffsense.report import summary_table
     from diffsense.solve import Evaluator, SolveConfig

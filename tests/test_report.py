@@ -9,8 +9,8 @@ import jax
 import numpy as np
 import pytest
 
-from diffsense._io import write_json
-from diffsense._result import RESULT_KEYS, Result
+from diffsense.runtime._io import write_json
+from diffsense.study._result import RESULT_KEYS, Result
 from diffsense.report import (
     comparison_table,
     plot_detection_timeline,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import diffsense
-from diffsense._result import _PACKAGES, RESULT_KEYS, Result, plain, versions
+from diffsense.study._result import _PACKAGES, RESULT_KEYS, Result, plain, versions
 from diffsense.solve import SolveResult
 from diffsense.solve._box import BoxResult
 from diffsense.solve._steps import SweepPoint

@@ -10,7 +10,7 @@ import dataclasses
 import pytest
 
 from diffsense.config import default_text
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene._scenario_config import (
     BackgroundSpec,
     LaneChangeSpec,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from diffsense.config import default_text, replace
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import (
     ADJACENT,
     EGO,

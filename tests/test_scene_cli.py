@@ -9,7 +9,7 @@ import sys
 import pytest
 
 import diffsense.cli.scene as cli
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 
 @pytest.fixture(autouse=True)

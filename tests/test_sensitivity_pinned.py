@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense._sensitivity import (
+from diffsense.study._sensitivity import (
     ODD_PARAMETERS,
     WEATHER_PARAMETERS,
     check_theta,

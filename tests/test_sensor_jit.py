@@ -9,7 +9,7 @@ import pytest
 from test_sensor_scenes import traffic_scene
 
 from diffsense import sensors as sensor
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import CAR, TRUCK
 
 KEY = jax.random.key(11, impl="rbg")  # threefry compiles ~3 s slower on CPU

@@ -12,7 +12,7 @@ from test_sensor_scenes import make_scene
 
 from diffsense import config as cfg
 from diffsense import sensors as sensor
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 CAMERA = sensor.load_config("camera")
 RADAR = sensor.load_config("radar")

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from test_sensor_scenes import make_scene
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.sensors import _gates as gates
 from diffsense.sensors import _geometry as geo
 from diffsense.sensors._geometry import Tracks

@@ -11,7 +11,7 @@ import pytest
 
 from diffsense import sensors as sensor
 from diffsense.config import default_text
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from tests._synthetic import straight_scene
 from tests._toy_pipeline import ToySensor
 

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.sensors._laws import (
     CameraDetection,
     RadarDetection,

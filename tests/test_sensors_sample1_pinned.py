@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from test_sensors_suite_pinned import KEY, ToyWithCovariance, _scene
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.sensors import Camera, Radar, Weather
 from diffsense.sensors._camera import camera_accuracy_px_per_rad
 from diffsense.sensors._fusion import Suite, fuse_members

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from test_sensor_scenes import make_scene
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.sensors import Weather
 from diffsense.sensors._detect import p_detect
 from diffsense.sensors._geometry import Tracks, polar

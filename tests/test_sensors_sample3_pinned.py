@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.sensors import make_sensor
 from diffsense.sensors._config import load_config
 from diffsense.sensors._params import check_params

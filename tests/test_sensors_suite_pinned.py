@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from test_sensor_scenes import make_scene
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import CAR
 from diffsense.sensors import Radar, make_sensor, register, sensor_names
 from diffsense.sensors import _sensor as sensor_module

@@ -1,5 +1,5 @@
 """An optimise config's every key reaches the `Problem` keyword arguments it names
-(`diffsense._settings`), the command line's overrides win, and a missing interval is refused in
+(`diffsense.study._settings`), the command line's overrides win, and a missing interval is refused in
 one line."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import dataclasses
 
 import pytest
 
-from diffsense._settings import load_settings, problem_fields
-from diffsense.errors import InputError
+from diffsense.study._settings import load_settings, problem_fields
+from diffsense.runtime._errors import InputError
 from diffsense.metrics import EstimatorConfig
 
 EVERY_KEY = """

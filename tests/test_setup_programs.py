@@ -14,8 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense._executables import call, keep_in
-from diffsense._optimise import seed_keys
+from diffsense.runtime._executables import call, keep_in
+from diffsense.study._optimise import seed_keys
 from diffsense.config import replace
 from diffsense.metrics._build import _scenario_keys, _variant_draws
 from diffsense.metrics._estimators import mc_uniforms

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from diffsense.config import replace
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import load_scenario, simulate_scenario
 from diffsense.scene._background_mobil import lane_change_starts
 from diffsense.scene._datatypes import ADJACENT, BACKGROUND, CAR, EGO, LEAD, TARGET, TRUCK, VAN

@@ -10,7 +10,7 @@ import numpy as np
 import optimistix as optx
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.solve import (
     BracketedSecant,
     SolveConfig,

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.solve import SolveConfig, solve
 from tests._analytic_objectives import HI, LO, bowl, dip_at, ripple
 

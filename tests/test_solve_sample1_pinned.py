@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.solve._box import BoxConfig, _Runner, box_solve
 from diffsense.solve._box_space import _Box
 from diffsense.solve._box_fns import BoxFunctions

@@ -81,7 +81,7 @@ def test_solve_result_to_dict_is_plain_and_complete():
 
 
 def test_solve_config_edges():
-    from diffsense.errors import InputError
+    from diffsense.runtime._errors import InputError
     from diffsense.solve import SolveConfig
 
     SolveConfig(tau_schedule=(2.0, 2.0, 1.0))  # equal temperatures may repeat

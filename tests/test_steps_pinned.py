@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.solve import default_steps, sweep
 from diffsense.solve._steps import check_interval, check_steps
 

@@ -1,12 +1,12 @@
-"""Suite files refused by their whole one-line message (`diffsense._suite_file`): the file's name
+"""Suite files refused by their whole one-line message (`diffsense.study._suite_file`): the file's name
 once, then what is wrong and what is expected, for each malformation the reader checks itself."""
 
 from __future__ import annotations
 
 import pytest
 
-from diffsense._suite_file import checked, load_suite
-from diffsense.errors import InputError
+from diffsense.study._suite_file import checked, load_suite
+from diffsense.runtime._errors import InputError
 
 SENSORS = 'sensors must be a list of sensor names, e.g. ["radar", "camera"], '
 GOOD = 'sensors = ["radar", "camera"]\ncost_weight = 0.002\n[params]\n"radar.hfov_deg" = [20.0, 120.0]\n'

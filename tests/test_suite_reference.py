@@ -169,7 +169,7 @@ def test_suite_gradient_against_float64_central_differences_and_finite_at_extrem
 
 def test_the_box_solve_judges_answers_on_e_ref_under_a_random_law(suite):
     import diffsense as ds
-    from diffsense._suite_solve import _functions
+    from diffsense.study._box_job import _functions
     from diffsense.report._tables import box_table
 
     laws = {"radar": "configs/sensors/laws/radar_swerling1.toml", "camera": "configs/sensors/laws/camera_confidence.toml"}

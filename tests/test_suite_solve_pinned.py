@@ -14,8 +14,8 @@ import jax
 import pytest
 
 import diffsense as ds
-from diffsense._domain import domain_note
-from diffsense._suite_solve import (
+from diffsense.study._domain import domain_note
+from diffsense.study._box_job import (
     ParetoFront,
     _functions,
     _on_hard,
@@ -23,7 +23,7 @@ from diffsense._suite_solve import (
     check_lambdas,
     pareto,
 )
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.metrics import make_objective
 from diffsense.solve import BoxConfig
 from diffsense.tracks import prediction_frames
@@ -215,7 +215,7 @@ def test_the_box_functions_price_a_design_with_the_problems_cost_model(tmp_path)
 
 
 def test_a_box_solve_is_seeded_by_the_problem(monkeypatch):
-    from diffsense import _suite_solve
+    from diffsense.study import _box_job as _suite_solve
 
     configs = []
     solve = _suite_solve.box_solve
@@ -227,7 +227,7 @@ def test_a_box_solve_is_seeded_by_the_problem(monkeypatch):
 
 
 def test_a_front_is_priced_in_the_cost_models_currency(monkeypatch, tmp_path):
-    from diffsense import _optimise
+    from diffsense.study import _optimise
 
     problem = _problem(box=BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3),
                        costs=_costs_file(tmp_path))

@@ -9,8 +9,8 @@ import jax
 import jax.numpy as jnp
 from jax import monitoring
 
-from diffsense import _timing
-from diffsense._timing import CompileClock
+from diffsense.runtime import _timing
+from diffsense.runtime._timing import CompileClock
 
 TRACE = "/jax/core/compile/jaxpr_trace_duration"
 LOWER = "/jax/core/compile/jaxpr_to_mlir_module_duration"

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from diffsense.config import replace
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene._traffic_config import TrafficConfig
 from diffsense.train._dataset import simulate_batch, simulation_keys
 

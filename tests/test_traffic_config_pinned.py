@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from diffsense.config import replace
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.scene import CAR, TRUCK, VAN
 from diffsense.scene._traffic_config import (
     KindConfig,

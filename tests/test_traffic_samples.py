@@ -13,7 +13,7 @@ import pytest
 
 from diffsense.cli import run
 from diffsense.config import to_dict
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.cli.generate import main
 from diffsense.scene._idm import IDMParams
 from diffsense.train._samples import (

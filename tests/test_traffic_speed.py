@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense._sensitivity import _speed_scenes, odd_shift
+from diffsense.study._sensitivity import _speed_scenes, odd_shift
 from diffsense.scene import load_scenario, simulate_scenario
 from diffsense.scene._scenario_config import Range
 from tests._recorded_files import write_highd

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense import _random
+from diffsense.runtime import _random
 from diffsense.config import replace
 from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams
 from diffsense.scene._traffic import _neighbours, traffic_step

@@ -13,7 +13,7 @@ import pytest
 
 import _tiny_traffic
 from diffsense.config import from_dict
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.predictors import load_predictor, predict_mean, read_card, state_dict_from_model
 from diffsense.predictors import load_weights
 from diffsense.train import TrainConfig, constant_velocity_m, load_samples, rmse_per_second, train

@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.train import load_samples
 from diffsense.train._data import split_by_simulation
 from diffsense.train._samples import LAYOUT_VERSION

@@ -14,9 +14,9 @@ import jax
 import numpy as np
 import pytest
 
-from diffsense import _io
+from diffsense.runtime import _io
 from diffsense.config import to_dict
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.train._dataset import (
     _simulate_batch, _traced_part, concatenate_shards, extract_batch, generate_samples, read_dataset,
     read_meta, read_shard, samples_per_simulation, simulate_batch, simulation_keys, write_dataset,

@@ -16,7 +16,7 @@ import pytest
 
 import _tiny_traffic
 from diffsense.config import from_dict, to_dict
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.train import TrainConfig, constant_velocity_m, load_samples, rmse_per_second
 from diffsense.train import _loop
 from diffsense.train._data import split_by_simulation

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.train import TrainConfig, constant_velocity_m, rmse_per_second
 from diffsense.train._config import DataConfig, OptimConfig, RunConfig
 from diffsense.train._loss import _log_cosh, class_bce, mse, nll

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from flax import serialization
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 from diffsense.predictors import _api, load_predictor, read_card, state_dict_from_model
 from diffsense.predictors._convert import model_from_state_dict
 from diffsense.predictors._model import model_from_params, param_shapes

@@ -8,7 +8,7 @@ import dataclasses
 import math
 
 from diffsense.cli._suite import suite_fields
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 
 def _param_boxes(params: list[str] | None) -> dict[str, tuple[float, float]]:
@@ -43,10 +43,8 @@ def _number_list(text: str, what: str) -> tuple[float, ...]:
 
 def problems(args: argparse.Namespace) -> list:
     """The `diffsense.Problem` of each sensor the flags ask for, every input checked."""
-    from diffsense import Problem
-    from diffsense._settings import load_settings, problem_fields, shared_fields
-    from diffsense._suite_file import checked
     from diffsense.solve import check_steps
+    from diffsense.study import Problem, checked, load_settings, problem_fields, shared_fields
 
     settings = load_settings(args.config)
     suite = suite_fields(args)

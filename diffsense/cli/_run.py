@@ -6,7 +6,7 @@ Only CLI modules import this. `run(main)` calls `main()` and keeps these promise
   <reason>`;
 - SIGINT (Ctrl-C), at any moment, prints the one line `interrupted` and exits 130; SIGTERM prints
   `terminated` and exits 143 (128 + the signal number, as a shell reports a signal); neither leaves
-  a temporary file, staging folder or half-published output set behind (`diffsense._io`).
+  a temporary file, staging folder or half-published output set behind (`diffsense.runtime._io`).
 
 Why not KeyboardInterrupt: a Ctrl-C that lands while JAX runs a host callback
 (`jax.pure_callback`) raises inside the callback, and XLA re-raises it as a `ValueError` with a
@@ -28,8 +28,8 @@ import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from diffsense import _io
-from diffsense.errors import InputError
+from diffsense import runtime
+from diffsense.runtime import InputError
 
 _SIGNALS = {signal.SIGINT: ("interrupted", 130), signal.SIGTERM: ("terminated", 143)}
 
@@ -114,7 +114,7 @@ def _watch(read_fd: int) -> None:
 
 def _end(signum: int) -> None:
     line, code = _SIGNALS[signum]
-    _io.abandon_temporaries()  # keeps the lock: nothing new is created or published after it
+    runtime.abandon_temporaries()  # keeps the lock: nothing new is created or published after it
     # Flush what the program already printed, from a helper thread: a flush blocked on a full
     # pipe must not stop the exit.
     flusher = threading.Thread(target=_flush_quietly, daemon=True)
@@ -136,12 +136,12 @@ def setup_jax(float64: bool = True, compilation_cache: bool = True) -> None:
     The cache lives in JAX_COMPILATION_CACHE_DIR when it is set, else in the user's cache
     directory (XDG_CACHE_HOME or ~/.cache)/diffsense/jax. Every program is cached, however
     quickly it compiled, so a second run of the same command compiles nothing. The objective's
-    compiled programs are kept beside it, in `executables/` (`diffsense._executables`), so a
+    compiled programs are kept beside it, in `executables/` (`diffsense.runtime._executables`), so a
     second run does not trace them either.
     """
     import jax
 
-    from diffsense._executables import keep_in
+    from diffsense.runtime import keep_in
 
     jax.config.update("jax_enable_x64", float64)
     keep_in(None)

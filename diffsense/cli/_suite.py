@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 
 def suite_fields(args: argparse.Namespace) -> dict | None:
@@ -17,7 +17,7 @@ def suite_fields(args: argparse.Namespace) -> dict | None:
                                       ("--interval", args.interval), ("--steps", args.steps)) if value]
     if given:
         raise InputError(f"--suite names the sensors and parameters: give no {given[0]} with it")
-    from diffsense._suite_file import load_suite
+    from diffsense.study import load_suite
 
     return load_suite(args.suite)
 
@@ -26,7 +26,7 @@ def pareto_lambdas(args: argparse.Namespace, problems: list) -> tuple[float, ...
     """The cost weights of --pareto (None without it), every conflicting flag refused."""
     if args.pareto is None:
         return None
-    from diffsense._suite_solve import DEFAULT_LAMBDAS, check_lambdas
+    from diffsense.study import DEFAULT_LAMBDAS, check_lambdas
 
     if len(problems) != 1:
         raise InputError("--pareto traces one problem's front: give one sensor or a suite, not both")
@@ -46,7 +46,7 @@ def pareto_run(problem: Any, lambdas: tuple[float, ...], out: Path, predictor: A
     and its table printed."""
     import diffsense as ds
     from diffsense import report
-    from diffsense._io import output_set
+    from diffsense.runtime import output_set
 
     with output_set(out) as staging:
         front = ds.pareto(problem, lambdas, predictor=predictor, progress=progress, on_evaluation=progress.evaluation)

@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
     from diffsense import config
     from diffsense.cli import setup_jax
-    from diffsense.scene._traffic_config import TrafficConfig
+    from diffsense.scene import TrafficConfig
 
     cfg = config.load(TrafficConfig, args.config) if args.config else config.load_default(TrafficConfig, "traffic/default.toml")
     changes = {}
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     import jax
     from tqdm import tqdm
 
-    from diffsense.train._dataset import check_output_dir, write_dataset
+    from diffsense.train import check_output_dir, write_dataset
 
     check_output_dir(Path(args.out))
     # The simulation is float32 whatever the x64 flag (the samples are float32): keep the flag.

@@ -21,8 +21,7 @@ from diffsense import cli as _cli
 from diffsense.cli._problems import problems
 from diffsense.cli._progress import Progress
 from diffsense.cli._suite import pareto_lambdas, pareto_run
-from diffsense.errors import InputError
-
+from diffsense.runtime import InputError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -106,8 +105,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _check_inputs(problems_: list) -> None:
     """Every input that can be checked before any computation: scenarios, predictor file."""
-    from diffsense.scene import load_scenario
-    from diffsense.scene._scenario_config import check_speed_offset
+    from diffsense.scene import check_speed_offset, load_scenario
 
     for problem in problems_:
         for name in () if problem.scenes is not None else problem.scenarios:
@@ -117,7 +115,7 @@ def _check_inputs(problems_: list) -> None:
 
 
 def _sensitivity_names(text: str | None, problems_: list) -> tuple[str, ...]:
-    from diffsense._sensitivity import ODD_PARAMETERS, check_theta
+    from diffsense.study import ODD_PARAMETERS, check_theta
 
     names = tuple(t.strip() for t in (text or "").split(",") if t.strip())
     unknown = [t for t in names if t not in ODD_PARAMETERS]
@@ -132,7 +130,7 @@ def _check_memory(todo: list, max_memory_gb: float | None) -> None:
     """Refuse, before any computation, a run whose estimated memory exceeds the limit."""
     import os
 
-    from diffsense._optimise import memory_estimate_bytes
+    from diffsense.study import memory_estimate_bytes
 
     if max_memory_gb is None:
         limit = 0.5 * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
@@ -153,7 +151,7 @@ def _join(args, out: Path) -> tuple[Path, bool]:
     import shutil
     import tempfile
 
-    from diffsense._distributed import initialize, is_writer
+    from diffsense.runtime import initialize, is_writer
 
     initialize(args.coordinator, args.num_processes, args.process_id)
     if is_writer():
@@ -173,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} exists and is not a folder")
-    from diffsense._io import check_writable, output_set
+    from diffsense.runtime import check_writable, output_set
 
     _sensitivity_names(args.sensitivity, todo)
     check_writable(out)  # before any computation
@@ -183,8 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.distributed:
         out, args.quiet = _join(args, out)
     import diffsense as ds
-    from diffsense._io import write_bytes
     from diffsense.predictors import load_predictor
+    from diffsense.runtime import write_bytes
 
     # matplotlib's import (about 0.4 s) overlaps the computations, which release the GIL.
     threading.Thread(target=importlib.import_module, args=("diffsense.report",), daemon=True).start()
@@ -205,7 +203,9 @@ def main(argv: list[str] | None = None) -> int:
             folder = staging / problem.sensor_kind if len(todo) > 1 else staging
             result = ds.optimise(problem, predictor=predictor, progress=progress, on_evaluation=progress.evaluation,
                                  sensitivity=theta)
-            from diffsense import report  # imported in the background above (or waits for it)
+            from diffsense import (
+                report,  # imported in the background above (or waits for it)
+            )
 
             results[problem.sensor_kind] = report.write_run(result, folder)
         if len(results) > 1:

@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from diffsense import cli as _cli, _io
-from diffsense.errors import InputError
+from diffsense import cli as _cli
+from diffsense import runtime
+from diffsense.runtime import InputError
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
@@ -37,22 +38,21 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
 
 
 def _parity(args: argparse.Namespace) -> int:
-    from diffsense.predictors._api import load_predictor
-    from diffsense.predictors._parity import reference_forward
+    from diffsense.predictors import load_predictor, reference_forward
 
     arrays = _read_npz(Path(args.inputs))
     predictor = load_predictor(args.checkpoint)
     out = reference_forward(predictor, arrays["hist"], arrays["nbrs"], arrays["mask"], args.inputs)
     buf = io.BytesIO()
     np.savez(buf, **out)
-    _io.write_bytes(args.out, buf.getvalue())
+    runtime.write_bytes(args.out, buf.getvalue())
     shapes = ", ".join(f"{k} {list(v.shape)}" for k, v in out.items())
     print(f"wrote {args.out}: {shapes}")
     return 0
 
 
 def _card(args: argparse.Namespace) -> int:
-    from diffsense.predictors._weights import DEFAULT_WEIGHTS, read_card
+    from diffsense.predictors import DEFAULT_WEIGHTS, read_card
 
     print(json.dumps(read_card(args.weights or DEFAULT_WEIGHTS), indent=2))
     return 0

@@ -14,7 +14,7 @@ import json
 import sys
 
 from diffsense.cli import run, setup_jax
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 _FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
@@ -48,8 +48,7 @@ def _show(args: argparse.Namespace) -> int:
     setup_jax(float64=False)
     import jax
 
-    from diffsense.scene import load_road, load_scenario, simulate_scenario
-    from diffsense.scene._view import scene_figure, scene_json
+    from diffsense.scene import load_road, load_scenario, scene_figure, scene_json, simulate_scenario
 
     cfg = load_scenario(args.scenario)
     road = load_road(cfg.road)
@@ -59,7 +58,7 @@ def _show(args: argparse.Namespace) -> int:
         json.dump(scene_json(scene, road, cfg.road), sys.stdout)
         sys.stdout.write("\n")
     if args.out:
-        from diffsense._io import save_figure
+        from diffsense.runtime import save_figure
 
         kind = "nominal" if args.variant == 0 else f"variant {args.variant}, seed {args.seed}"
         save_figure(scene_figure(scene, road, f"{cfg.description or cfg.name} ({kind})"), args.out, dpi=120)

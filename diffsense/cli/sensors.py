@@ -14,7 +14,7 @@ import math
 import sys
 
 from diffsense.cli import run, setup_jax
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 _KINDS = ("car", "van", "truck")
 _PLOT_FORMATS = ("png", "pdf", "svg")
@@ -101,8 +101,8 @@ def _plot(path: str, sensor: str, settings, config, probe: dict) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from diffsense._io import save_figure
-    from diffsense.sensors._inspect import coverage_field
+    from diffsense.runtime import save_figure
+    from diffsense.sensors import coverage_field
 
     reach = 1.2 * max(float(p.range_m) for p in settings)
     xs = np.linspace(-0.5 * reach, reach, 241)
@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     _check_probe(args)
     setup_jax(float64=True)
     from diffsense.sensors import load_config
-    from diffsense.sensors._inspect import boresight_report
+    from diffsense.sensors import boresight_report
 
     config = load_config(args.sensor, args.config, args.profile)
     settings = _settings(args, config)

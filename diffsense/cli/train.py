@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from diffsense import cli as _cli
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -20,11 +20,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     from diffsense import config
-    from diffsense.train._config import TrainConfig
+    from diffsense.train import TrainConfig
 
     cfg = config.load(TrainConfig, args.config)
     _cli.setup_jax(float64=False)
-    from diffsense.train._loop import train
+    from diffsense.train import train
 
     card = train(cfg, resume=args.resume, progress=not args.no_progress)
     rmse = card["validation"]["rmse_m"]

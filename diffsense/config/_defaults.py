@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from diffsense.config._schema import from_dict, parse_toml
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 C = TypeVar("C")
 

@@ -19,7 +19,7 @@ import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 C = TypeVar("C")
 

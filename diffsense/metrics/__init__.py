@@ -1,6 +1,7 @@
 """Metrics: E_RMSE(r) (the paper's Eq. 12) as a pure equinox Module, its estimators, and the
 per-horizon RMSE of both predictions against the true future."""
 
+from diffsense.metrics._breakdown import breakdown, tracked_summary
 from diffsense.metrics._build import (
     PAPER_SCENARIOS,
     SpeedShiftedScenes,
@@ -11,17 +12,27 @@ from diffsense.metrics._build import (
     speed_shifted_scenes,
     with_scenes,
 )
-from diffsense.metrics._estimators import ESTIMATORS, Estimator, EstimatorConfig, relaxed_bernoulli
 from diffsense.metrics._cost import cost_breakdown, load_costs, make_cost
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
-from diffsense.metrics._reference import ReferenceEvaluation, is_deterministic, reference_draw_margins, safe_sqrt
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
+from diffsense.metrics._estimators import (
+    ESTIMATORS,
+    Estimator,
+    EstimatorConfig,
+    relaxed_bernoulli,
+)
 from diffsense.metrics._grad import value_and_grad
 from diffsense.metrics._objective import QUESTIONS, Objective
+from diffsense.metrics._reference import (
+    ReferenceEvaluation,
+    is_deterministic,
+    reference_draw_margins,
+    safe_sqrt,
+)
 
 __all__ = [
-    "COVERAGE_PARTS", "QUESTIONS", "cost_breakdown", "coverage_parts", "load_costs", "make_cost",
+    "COVERAGE_PARTS", "QUESTIONS", "breakdown", "cost_breakdown", "coverage_parts", "load_costs", "make_cost",
     "ESTIMATORS", "PAPER_SCENARIOS", "Estimator", "EstimatorConfig", "HardEvaluation", "Objective",
     "ObjectiveData", "ReferenceEvaluation", "is_deterministic", "reference_draw_margins", "make_objective", "recorded_scenes", "relaxed_bernoulli", "relevance_reach", "safe_sqrt",
-    "simulate_scenes", "SpeedShiftedScenes", "speed_shifted_scenes", "value_and_grad", "with_scenes",
+    "simulate_scenes", "SpeedShiftedScenes", "tracked_summary", "speed_shifted_scenes", "value_and_grad", "with_scenes",
 ]

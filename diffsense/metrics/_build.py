@@ -17,18 +17,32 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense._executables import call
 from diffsense.config import replace
-from diffsense.errors import InputError
-from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms
 from diffsense.metrics._datatypes import ObjectiveData
+from diffsense.metrics._estimators import EstimatorConfig, mc_uniforms
 from diffsense.metrics._objective import QUESTIONS, Objective
 from diffsense.metrics._sharding import shard_leading_axis
 from diffsense.predictors import InputSpec
-from diffsense.scene import Scene, ScenarioConfig, load_scenario, relevant_vehicles, simulate_scenario
-from diffsense.scene._relevant import relevant_selection, select_vehicles
+from diffsense.runtime import InputError, call
+from diffsense.scene import (
+    ScenarioConfig,
+    Scene,
+    load_recorded,
+    load_scenario,
+    relevant_selection,
+    relevant_vehicles,
+    select_vehicles,
+    simulate_scenario,
+)
 from diffsense.sensors import CLEAR, Sensor, Weather
-from diffsense.tracks import FillPolicy, build_inputs, flatten_instants, ground_truth_detections, prediction_frames, true_future
+from diffsense.tracks import (
+    FillPolicy,
+    build_inputs,
+    flatten_instants,
+    ground_truth_detections,
+    prediction_frames,
+    true_future,
+)
 
 PAPER_SCENARIOS: tuple[str, ...] = ("sc01", "sc02", "sc03", "sc04", "sc05", "sc06")
 
@@ -133,8 +147,6 @@ def recorded_scenes(
 ) -> tuple[Scene, np.ndarray, tuple[str, ...], Weather]:
     """Scenes cut from a recording (`"highd:PATH"` or `"ngsim:PATH"`), each its own scenario of one
     variant, reduced to their relevant vehicles like simulated ones; clear weather."""
-    from diffsense.scene import load_recorded
-
     cut = load_recorded(source, dtype=dtype)
     kept = []
     for scene in cut:

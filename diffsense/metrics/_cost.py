@@ -24,7 +24,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from diffsense import config as cfgio
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.sensors import Sensor
 
 # (value / reference) is floored here before its log: a "power" term with a negative exponent

@@ -35,7 +35,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from diffsense import _random
+from diffsense import runtime
+from diffsense.runtime import InputError
 
 Estimator = Literal["auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard"]
 ESTIMATORS: tuple[str, ...] = ("auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard")
@@ -68,8 +69,6 @@ class EstimatorConfig:
     reference_temperature: float = 0.01
 
     def __post_init__(self):
-        from diffsense.errors import InputError
-
         if self.kind not in ESTIMATORS:
             raise InputError(f"unknown estimator {self.kind!r} (known: {', '.join(ESTIMATORS)})")
         if self.samples < 1:
@@ -96,7 +95,7 @@ def relaxed_bernoulli(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temper
 def mc_uniforms(key: Array, samples: int, shape: tuple[int, ...], dtype) -> Float[Array, "K *S"]:
     """The fixed uniform draws of the Monte-Carlo estimator, strictly inside (0, 1)."""
     tiny = jnp.finfo(dtype).eps
-    return _random.uniform(key, (samples, *shape), dtype, tiny, 1.0 - tiny)
+    return runtime.uniform(key, (samples, *shape), dtype, tiny, 1.0 - tiny)
 
 
 def relaxed_draw(p: Float[Array, "*S"], uniform: Float[Array, "*S"], temperature: Array) -> Float[Array, "*S"]:

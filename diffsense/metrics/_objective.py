@@ -52,8 +52,7 @@ from diffsense.metrics._reference import (
 )
 from diffsense.metrics._sampling import estimator_samples
 from diffsense.predictors import InputSpec
-from diffsense.sensors import Sensor, Weather
-from diffsense.sensors._datatypes import Detections
+from diffsense.sensors import Detections, Sensor, Weather
 from diffsense.tracks import FillPolicy, build_inputs, flatten_instants
 
 Mode = Literal["soft", "hard", "reference"]

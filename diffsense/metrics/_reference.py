@@ -31,11 +31,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from diffsense import _random
+from diffsense import runtime
 from diffsense.metrics._estimators import _clipped_logit  # the relaxed draw's clipping
-from diffsense.sensors import Suite
-from diffsense.sensors._datatypes import Detections
-from diffsense.sensors._fusion import fuse_members
+from diffsense.sensors import Detections, Suite, fuse_members
 
 # Folded into each variant's noise key to give the reference's uniforms their own stream, and
 # the Monte-Carlo estimator's draws of a suite's members theirs (independent of the reference's).
@@ -94,7 +92,7 @@ def reference_uniforms(noise_key: Array, draw: Array, shape: tuple[int, ...], dt
         stream = jax.random.fold_in(jax.random.fold_in(key, stream_id), draw)
         if member is not None:
             stream = jax.random.fold_in(stream, member)
-        return _random.uniform(stream, shape, dtype)
+        return runtime.uniform(stream, shape, dtype)
 
     return jax.vmap(one)(noise_key)
 

@@ -21,26 +21,38 @@ from diffsense.predictors._api import (
     select_mean,
 )
 from diffsense.predictors._cast import COMPUTE_DTYPES, CastPredictor, with_compute_dtype
-from diffsense.predictors._protocol import CSLSTM_SPEC, InputSpec, Predictor, PredictorInputs
 from diffsense.predictors._checkpoint import read_state_dict
 from diffsense.predictors._convert import model_from_state_dict, state_dict_from_model
-from diffsense.predictors._frame import M_PER_FT, model_to_si, si_to_model
+from diffsense.predictors._frame import model_to_si, si_to_model
 from diffsense.predictors._lstm_forward import forward_mode
 from diffsense.predictors._model import (
+    CSLSTM,
     FUT_LEN,
     HIST_LEN,
+    N_LAT,
+    N_LON,
     N_SLOTS,
-    CSLSTM,
     Prediction,
+    new_model,
     output_activation,
 )
 from diffsense.predictors._parity import reference_forward, reference_to_compact
-from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights, read_card, save_weights
+from diffsense.predictors._protocol import Predictor
+from diffsense.predictors._weights import (
+    DEFAULT_WEIGHTS,
+    load_weights,
+    read_card,
+    save_weights,
+)
+from diffsense.tracks import CSLSTM_SPEC, M_PER_FT, InputSpec, PredictorInputs
 
 __all__ = [
     "COMPUTE_DTYPES",
     "CastPredictor",
     "CSLSTM_SPEC",
+    "N_LAT",
+    "N_LON",
+    "new_model",
     "InputSpec",
     "Predictor",
     "PredictorInputs",

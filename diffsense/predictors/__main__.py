@@ -1,4 +1,4 @@
-"""`python -m diffsense.predictors`: the command line in diffsense.cli.predict."""
+"""`python -m diffsense.predictors`: the same as `diffsense predict` (the command line is diffsense.cli.predict's)."""
 
 from diffsense.cli import run
 from diffsense.cli.predict import main

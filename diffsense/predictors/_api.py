@@ -36,13 +36,13 @@ import jax.numpy as jnp
 from flax import nnx
 from jaxtyping import Array, Float, Int
 
-from diffsense.errors import InputError
 from diffsense.predictors._checkpoint import read_state_dict
 from diffsense.predictors._convert import model_from_state_dict
 from diffsense.predictors._frame import model_to_si, si_to_model
-from diffsense.predictors._protocol import CSLSTM_SPEC, InputSpec, PredictorInputs
-from diffsense.predictors._model import N_LAT, CSLSTM, Prediction, new_model
+from diffsense.predictors._model import CSLSTM, N_LAT, Prediction, new_model
 from diffsense.predictors._weights import DEFAULT_WEIGHTS, load_weights, read_card
+from diffsense.runtime import InputError
+from diffsense.tracks import CSLSTM_SPEC, InputSpec, PredictorInputs
 
 Mode = Literal["most_probable", "weighted"]
 

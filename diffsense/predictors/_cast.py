@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from diffsense.predictors._protocol import InputSpec, PredictorInputs
+from diffsense.tracks import InputSpec, PredictorInputs
 
 COMPUTE_DTYPES = ("float32", "float64")
 

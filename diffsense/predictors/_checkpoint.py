@@ -41,7 +41,7 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 MiB = 1 << 20
 MAX_STORAGE_BYTES = 64 * MiB

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from flax import nnx
 
-from diffsense.errors import InputError
 from diffsense.predictors._model import CSLSTM, model_from_params, param_shapes
+from diffsense.runtime import InputError
 
 _LINEARS = ("ip_emb", "dyn_emb", "op", "op_lat", "op_lon")
 _LSTMS = ("enc_lstm", "dec_lstm")

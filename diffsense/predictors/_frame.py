@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-M_PER_FT = 0.3048  # international foot [m]
+from diffsense.tracks import M_PER_FT
 
 
 def si_to_model(xy_m: Float[Array, "... 2"]) -> Float[Array, "... 2"]:

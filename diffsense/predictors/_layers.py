@@ -14,13 +14,13 @@ import jax.numpy as jnp
 from flax import nnx
 from jaxtyping import Array, Float
 
-from diffsense import _random
-from diffsense.predictors._lstm import leaky_relu, lstm_last, lstm_repeat  # leaky_relu: re-exported
+from diffsense import runtime
+from diffsense.predictors._lstm import lstm_last, lstm_repeat
 
 
 def _uniform(rngs: nnx.Rngs, shape: tuple[int, ...], fan_in: int) -> jax.Array:
     bound = 1.0 / math.sqrt(fan_in)
-    return _random.uniform(rngs.params(), shape, jnp.float32, -bound, bound)
+    return runtime.uniform(rngs.params(), shape, jnp.float32, -bound, bound)
 
 
 class Linear(nnx.Module):

@@ -34,7 +34,13 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from diffsense.predictors._lstm_cell import Gates, cell_step, leaky_relu, split_gates, unrolled
+from diffsense.predictors._lstm_cell import (
+    Gates,
+    cell_step,
+    leaky_relu,
+    split_gates,
+    unrolled,
+)
 from diffsense.predictors._lstm_forward import forward_mode_active, lstm_forward
 
 __all__ = ["leaky_relu", "lstm_last", "lstm_repeat"]

@@ -31,7 +31,13 @@ import jax
 import jax.numpy as jnp
 from jax.custom_derivatives import SymbolicZero
 
-from diffsense.predictors._lstm_cell import Gates, halve_ifo, leaky_relu, split_gates, unrolled
+from diffsense.predictors._lstm_cell import (
+    Gates,
+    halve_ifo,
+    leaky_relu,
+    split_gates,
+    unrolled,
+)
 
 STACK_ROWS = 512  # products of fewer rows than this take primal and tangent rows together
 _FORWARD = contextvars.ContextVar("diffsense_lstm_forward_mode", default=False)

@@ -24,7 +24,8 @@ import jax.numpy as jnp
 from flax import nnx
 from jaxtyping import Array, Float, Int
 
-from diffsense.predictors._layers import LSTM, FullWidthConv, Linear, leaky_relu
+from diffsense.predictors._layers import LSTM, FullWidthConv, Linear
+from diffsense.predictors._lstm import leaky_relu
 
 HIST_LEN = 16
 FUT_LEN = 25

@@ -12,9 +12,9 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from diffsense.errors import InputError
 from diffsense.predictors._api import CSLSTMPredictor, predict_model_frame
 from diffsense.predictors._model import ENC_SIZE, HIST_LEN, N_CELLS, N_LANES, N_SLOTS
+from diffsense.runtime import InputError
 
 
 def reference_to_compact(hist, nbrs, mask, source: str = "inputs"):

@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 from flax import nnx, serialization
 
-from diffsense import _io
-from diffsense.errors import InputError
+from diffsense import runtime
 from diffsense.predictors._model import CSLSTM, model_from_params, param_shapes
+from diffsense.runtime import InputError
 
 FORMAT = "diffsense-cslstm"
 VERSION = 1
@@ -38,9 +38,9 @@ def weights_to_bytes(model: CSLSTM) -> bytes:
 
 def save_weights(path: str | Path, model: CSLSTM, card: dict[str, Any] | None = None) -> None:
     """Write the weights (and their card, if given) atomically."""
-    _io.write_bytes(path, weights_to_bytes(model))
+    runtime.write_bytes(path, weights_to_bytes(model))
     if card is not None:
-        _io.write_json(card_path(path), card)
+        runtime.write_json(card_path(path), card)
 
 
 def model_from_bytes(data: bytes, source: str) -> CSLSTM:

@@ -8,14 +8,29 @@
     write_pareto, pareto_table       pareto.json and pareto.png of `diffsense.pareto`; its printed table
     CompileClock                     wall time split into JAX compilation and the rest
 
-Everything is written atomically (diffsense._io).
+Everything is written atomically (diffsense.runtime._io).
 """
 
-from diffsense._timing import CompileClock
-from diffsense.report._figures import plot_detection_timeline, plot_objective, plot_rmse_horizon
-from diffsense.report._pareto import PARETO_FILES, pareto_table, plot_pareto, write_pareto
+from diffsense.report._figures import (
+    plot_detection_timeline,
+    plot_objective,
+    plot_rmse_horizon,
+)
+from diffsense.report._pareto import (
+    PARETO_FILES,
+    pareto_table,
+    plot_pareto,
+    write_pareto,
+)
 from diffsense.report._run import RUN_FILES, write_run
-from diffsense.report._tables import box_table, breakdown_table, comparison_table, format_table, summary_table
+from diffsense.report._tables import (
+    box_table,
+    breakdown_table,
+    comparison_table,
+    format_table,
+    summary_table,
+)
+from diffsense.runtime import CompileClock
 
 __all__ = [
     "CompileClock",

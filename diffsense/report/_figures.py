@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from diffsense._io import save_figure
+from diffsense.runtime import save_figure
 
 # The predictor's horizon: 25 points at 5 Hz (0.2 .. 5 s).
 HORIZON_DT_S = 0.2

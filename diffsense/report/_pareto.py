@@ -15,8 +15,8 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
-from diffsense._io import save_figure, write_json
 from diffsense.report._tables import format_table
+from diffsense.runtime import save_figure, write_json
 
 PARETO_FILES = ("pareto.json", "pareto.png")
 

@@ -5,8 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from diffsense._io import write_json
-from diffsense.report._figures import plot_detection_timeline, plot_objective, plot_rmse_horizon
+from diffsense.report._figures import (
+    plot_detection_timeline,
+    plot_objective,
+    plot_rmse_horizon,
+)
+from diffsense.runtime import write_json
 
 RUN_FILES = ("result.json", "objective.png", "rmse_horizon.png", "detections.png")
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from diffsense.solve import explain
+
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     """Aligned text: first column left-aligned, the others right-aligned."""
@@ -80,8 +82,6 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
     for theta, d in (result.get("sensitivity") or {}).items():
         lines += [f"dr*/d{theta}: " + ", ".join(f"{p} {v:+.4g}" if v is not None else f"{p} undefined"
                                                 for p, v in d.items()) + held]
-    from diffsense._answer import explain
-
     near = result.get("near_optimal") or {}
     lines += [f"warning: {w}" for w in explain(result.get("flags", []), near.get("intervals", []), unit)]
     return "\n".join(lines)

@@ -1,9 +1,9 @@
 """The case study's tables (markdown) and the paper's three statements, from the JSON that
-`benchmarks/case_study.py` writes (`python -m diffsense.report.case_study FILE... [--figure-dir=DIR]`
+`benchmarks/case_study.py` writes (`diffsense case-study FILE... [--figure-dir DIR]`
 prints them; docs/case-study.md holds that output):
 
-    python -m diffsense.report.case_study benchmarks/results/case_study_shipped.json \
-        benchmarks/results/case_study_ngsim.json --figure-dir=docs/img
+    diffsense case-study benchmarks/results/case_study_shipped.json \
+        benchmarks/results/case_study_ngsim.json --figure-dir docs/img
 
 Each profile is read with its own fill (physical: hold, paper: zero, the paper's raw pipeline);
 the radar imputation table shows all three fills. Both questions: Eq. 12 pooled (E_hard) and the
@@ -14,10 +14,11 @@ of instants that are not).
 from __future__ import annotations
 
 import json
-import sys
+from collections.abc import Sequence
 from pathlib import Path
 
-from diffsense.errors import InputError
+from diffsense.report._figures import plot_rmse_horizon
+from diffsense.runtime import InputError
 
 PROFILE_FILL = {"physical": "hold", "paper": "zero"}
 
@@ -103,18 +104,16 @@ def statements(runs: dict, weights: list[str], steps: list[float]) -> str:
 def figure(path: str, runs: dict, key: tuple) -> None:
     """The paper's Fig. 6/7 for one run: per scenario, RMSE against the true future at each
     horizon step, ground-truth input (black) and sensor input at each HFOV step."""
-    from diffsense.report._figures import plot_rmse_horizon
-
     run = runs[key]
     curves = {name: {"gt": run["rmse_gt"][i], "steps": {s["r"]: s["rmse_sensor"][i] for s in run["steps"]}}
               for i, name in enumerate(run["scenarios"])}
     plot_rmse_horizon(path, curves, param="HFOV", unit="deg", title=" / ".join(key))
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    figures = [a.split("=", 1)[1] for a in argv if a.startswith("--figure-dir=")]
-    paths = [a for a in argv if not a.startswith("--")]
+def print_case_study(paths: Sequence[str], figure_dirs: Sequence[str] = ()) -> int:
+    """Print the case study's tables from `benchmarks/case_study.py`'s results files, and write
+    Figs. 6 and 7 (for the first weights, each profile with its fill) into each of `figure_dirs`."""
+    figures = list(figure_dirs)
     data = [_load(p) for p in paths]
     runs = index_runs(data)
     weights = list(dict.fromkeys(w for w, *_ in runs))
@@ -142,14 +141,3 @@ def _load(path: str) -> dict:
         return json.loads(text)
     except ValueError as e:
         raise InputError(f"{path}: not a results file: {e}") from None
-
-
-def console(argv: list[str] | None = None) -> None:
-    """`main` under the command line's error contract (`diffsense.cli.run`)."""
-    from diffsense.cli._run import run
-
-    run(lambda: main(argv))
-
-
-if __name__ == "__main__":
-    console()

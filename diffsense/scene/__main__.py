@@ -1,4 +1,4 @@
-"""`python -m diffsense.scene`: the command line in diffsense.cli.scene."""
+"""`python -m diffsense.scene`: the same as `diffsense scene` (the command line is diffsense.cli.scene's)."""
 
 from diffsense.cli import run
 from diffsense.cli.scene import main

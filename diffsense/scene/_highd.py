@@ -37,7 +37,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.scene._datatypes import CAR, TRUCK, Scene
 from diffsense.scene._recorded import (
     DEFAULT_CROSSING_AT_S,

@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from diffsense.config import list_defaults, load, load_default
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 C = TypeVar("C")
 

@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.scene._datatypes import BACKGROUND, EGO, LEAD, TARGET, TARGET_LEAD, Scene
 from diffsense.scene._simulate import SCENE_DT_S
 
@@ -243,18 +243,3 @@ def recorded_scenes(
         raise InputError(f"{rec.path}: {len(changes)} lane change(s) found, none with the target and an ego "
                          f"present for the whole {duration_s} s window starting {crossing_at_s} s before it")
     return scenes, infos
-
-
-def load_recorded(spec: str, **options) -> list[Scene]:
-    """Scenes from `"highd:PATH"` (a highD NN_tracks.csv) or `"ngsim:PATH"` (an NGSIM trajectory CSV).
-
-    `options` (duration_s, crossing_at_s, hold_s, dtype) go to `load_highd` / `load_ngsim`.
-    """
-    from diffsense.scene._highd import load_highd
-    from diffsense.scene._ngsim import load_ngsim
-
-    kind, sep, path = str(spec).partition(":")
-    loaders = {"highd": load_highd, "ngsim": load_ngsim}
-    if not sep or kind.lower() not in loaders or not path:
-        raise InputError(f"recorded scenes are named 'highd:PATH' or 'ngsim:PATH', got {spec!r}")
-    return loaders[kind.lower()](path, **options)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 
 def _header(path: Path, reader, columns: Sequence[str]) -> list[int]:

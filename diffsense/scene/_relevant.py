@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Int
 
-from diffsense._executables import call
+from diffsense.runtime import call
 from diffsense.scene._datatypes import BACKGROUND, CAR, EGO_INDEX, TARGET_INDEX, Scene
 
 # The road-frame box must contain the straight sight line, which bows in (s, d) on a bend by the

@@ -24,7 +24,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from diffsense.config import list_defaults
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.scene._named_config import load_named
 
 # Newton steps of the projection onto a piece: the error squares each step (|d| kappa << 1 on a

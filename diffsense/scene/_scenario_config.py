@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Literal
 
 from diffsense.config import list_defaults, load_default
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.scene._named_config import load_named
 
 KindName = Literal["car", "van", "truck"]

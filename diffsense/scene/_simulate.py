@@ -15,14 +15,22 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from diffsense._executables import call
-from diffsense.errors import InputError
+from diffsense.runtime import InputError, call
 from diffsense.scene._background_mobil import lane_change_starts
 from diffsense.scene._datatypes import BACKGROUND, Scene
 from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams, idm_acceleration
-from diffsense.scene._lane_change import quintic_lateral_offset_m, quintic_lateral_speed_mps
+from diffsense.scene._lane_change import (
+    quintic_lateral_offset_m,
+    quintic_lateral_speed_mps,
+)
 from diffsense.scene._mobil import MOBILParams
-from diffsense.scene._road import Road, curvature_1pm, frenet_to_cartesian, lane_index, load_road
+from diffsense.scene._road import (
+    Road,
+    curvature_1pm,
+    frenet_to_cartesian,
+    lane_index,
+    load_road,
+)
 from diffsense.scene._scenario_config import (
     DriverModel,
     ScenarioConfig,
@@ -30,7 +38,12 @@ from diffsense.scene._scenario_config import (
     check_speed_offset,
     load_vehicle_models,
 )
-from diffsense.scene._variants import ScenarioNumbers, VehiclePlan, draw_plan, scenario_numbers
+from diffsense.scene._variants import (
+    ScenarioNumbers,
+    VehiclePlan,
+    draw_plan,
+    scenario_numbers,
+)
 
 SCENE_DT_S = 0.1  # 10 Hz, the rate of the paper's recordings
 MIN_DESIRED_SPEED_MPS = 1.0  # a floor only: every shipped scenario starts at highway speed

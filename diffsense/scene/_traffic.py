@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PRNGKeyArray
 
-from diffsense import _random
+from diffsense import runtime
 from diffsense.scene._idm import FREE_ROAD_GAP_M, IDMParams, idm_acceleration
 from diffsense.scene._mobil import MOBILParams, mobil_incentive_mps2, mobil_wants_change
 from diffsense.scene._traffic_config import TrafficConfig
@@ -180,7 +180,7 @@ def traffic_step(
 
     starts, new_target = _lane_change_starts(cfg, vehicles, state, idm, accel, accel_r, neighbours)
 
-    u = _random.uniform(key, (5, num_v), dtype)
+    u = runtime.uniform(key, (5, num_v), dtype)
     duration = jnp.where(starts, lc.duration_s[0] + u[0] * (lc.duration_s[1] - lc.duration_s[0]), state.change_duration_s)
     since = jnp.where(starts, 0.0, state.since_change_s) + DT_S
     done = (new_target != state.lane) & (since >= duration)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 Interval = tuple[float, float]
 # Shortest ring road: twice the social grid's reach (2 x 90 ft = 54.9 m) and a margin, so that no

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, PRNGKeyArray
 
-from diffsense import _random
+from diffsense import runtime
 from diffsense.scene._idm import IDMParams
 from diffsense.scene._lane_change import quintic_progress
 from diffsense.scene._traffic_config import TrafficConfig
@@ -117,7 +117,7 @@ def num_steps(cfg: TrafficConfig) -> tuple[int, int]:
 
 def _uniform(key: PRNGKeyArray, interval, shape, dtype) -> Array:
     lo, hi = interval
-    return _random.uniform(key, shape, dtype, lo, hi)
+    return runtime.uniform(key, shape, dtype, lo, hi)
 
 
 def _by_kind(kind: Int[Array, "V"], u: Float[Array, "V"], intervals) -> Float[Array, "V"]:
@@ -157,7 +157,7 @@ def init_traffic(cfg: TrafficConfig, key: PRNGKeyArray, dtype=jnp.float32) -> tu
     density = _uniform(keys[0], traffic.density_veh_per_km_lane, (), dtype)
     mean_v0 = _uniform(keys[1], traffic.desired_speed_mps, (), dtype)
     kind = jax.random.choice(keys[2], 3, (num_v,), p=jnp.asarray(traffic.kind_probabilities, dtype)).astype(jnp.int32)
-    u = _random.uniform(keys[3], (7, num_v), dtype)
+    u = runtime.uniform(keys[3], (7, num_v), dtype)
     kinds = cfg.kinds
     length = _by_kind(kind, u[0], [k.length_m for k in kinds])
     width = _by_kind(kind, u[1], [k.width_m for k in kinds])
@@ -177,10 +177,10 @@ def init_traffic(cfg: TrafficConfig, key: PRNGKeyArray, dtype=jnp.float32) -> tu
     # Place each lane's vehicles around the ring: body + s0 + a random share of the free length.
     need = (length + idm.min_gap_m).reshape(n_lanes, per_lane)
     ring = jnp.maximum(per_lane * 1000.0 / density, jnp.max(jnp.sum(need, axis=1)) * 1.05)
-    weights = _random.uniform(keys[6], (n_lanes, per_lane), dtype, 0.5, 1.5)
+    weights = runtime.uniform(keys[6], (n_lanes, per_lane), dtype, 0.5, 1.5)
     extra = (ring - jnp.sum(need, axis=1, keepdims=True)) * weights / jnp.sum(weights, axis=1, keepdims=True)
     pitch = need + extra  # from a vehicle's rear to the next one's rear
-    lane_offset = _random.uniform(keys[7], (n_lanes, 1), dtype, 0.0, 1.0) * ring
+    lane_offset = runtime.uniform(keys[7], (n_lanes, 1), dtype, 0.0, 1.0) * ring
     rear = lane_offset + jnp.cumsum(pitch, axis=1) - pitch
     s = (rear.reshape(num_v) + 0.5 * length)
     gap = (pitch - need).reshape(num_v) + idm.min_gap_m

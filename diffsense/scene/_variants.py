@@ -14,8 +14,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PRNGKeyArray
 
-from diffsense import _random
-from diffsense.scene._datatypes import ADJACENT, BACKGROUND, EGO, KIND_NAMES, LEAD, TARGET, TARGET_LEAD
+from diffsense import runtime
+from diffsense.scene._datatypes import (
+    ADJACENT,
+    BACKGROUND,
+    EGO,
+    KIND_NAMES,
+    LEAD,
+    TARGET,
+    TARGET_LEAD,
+)
 from diffsense.scene._road import Road, lane_centre_d_m
 from diffsense.scene._scenario_config import ScenarioConfig, VehicleModels
 
@@ -142,7 +150,7 @@ def scenario_numbers(cfg: ScenarioConfig, models: VehicleModels, road: Road, dty
 
 
 def _draw(key: PRNGKeyArray, r: Float[Array, "*R 3"], nominal: Bool[Array, ""]) -> Float[Array, "*R"]:
-    value = _random.uniform(key, r.shape[:-1], r.dtype, r[..., 1], r[..., 2])
+    value = runtime.uniform(key, r.shape[:-1], r.dtype, r[..., 1], r[..., 2])
     return jnp.where(nominal, r[..., 0], value)
 
 

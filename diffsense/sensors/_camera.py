@@ -16,10 +16,15 @@ the object's width in pixels and its visible fraction (inside the image and unhi
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any, ClassVar
+
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from diffsense.scene import Scene
+from diffsense.sensors._config import CameraConfig, load_config, param_specs
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
@@ -30,10 +35,10 @@ from diffsense.sensors._laws import (
     log_confidence_above,
     log_reported_below,
 )
-from diffsense.sensors._mount import mount_of
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
-from diffsense.sensors._config import CameraConfig
-from diffsense.sensors._params import CameraParams
+from diffsense.sensors._mount import mount_of
+from diffsense.sensors._params import CameraParams, ParamSpec
+from diffsense.sensors._sensor import Sensor, params_of
 from diffsense.sensors._weather import CLEAR, Weather
 
 
@@ -116,3 +121,31 @@ def camera_detect(
 ) -> Detections:
     """Camera `Detections` [T, V]: p_detect and noisy stereo depth/bearing in the world."""
     return detect_of(_camera_terms, scene, params, config, key, mode, temperature, weather)
+
+
+class Camera(Sensor):
+    """The stereo camera: equidistant lens, resolvability, stereo depth noise, occlusion.
+
+    `config` holds every constant (`configs/sensors/camera.toml`, or a user TOML via
+    `Camera.from_toml`); its `params` are the defaults of r.
+    """
+
+    config: CameraConfig = eqx.field(static=True)
+    kind: ClassVar[str] = "camera"
+
+    @classmethod
+    def from_toml(cls, path: str | Path | None = None, profile: str = "physical") -> Camera:
+        """The camera of the shipped `profile` ("physical" or "paper"), with the keys of the TOML
+        at `path` (any subset of its constants) replacing the profile's."""
+        return cls(load_config("camera", path, profile))
+
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        return param_specs("camera", self.config)
+
+    @property
+    def mount_x_m(self) -> float:
+        return float(self.config.mount_x_m)
+
+    def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode, temperature, weather) -> Detections:
+        return camera_detect(scene, params_of(CameraParams, r), self.config, noise, mode=mode, temperature=temperature,
+                             weather=weather)

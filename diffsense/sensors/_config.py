@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from diffsense import config as _config
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.sensors._laws import CameraDetection, RadarDetection
 from diffsense.sensors._mount import check_mount
 from diffsense.sensors._params import (

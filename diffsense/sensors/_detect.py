@@ -6,13 +6,13 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.scene import Scene
 from diffsense.sensors._camera import camera_detect, camera_p_detect
+from diffsense.sensors._config import CameraConfig, RadarConfig
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._measure import KeyOrNoise, measurement_noise
-from diffsense.sensors._config import CameraConfig, RadarConfig
 from diffsense.sensors._params import CameraParams, RadarParams
 from diffsense.sensors._radar import radar_detect, radar_p_detect
 

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.scene import EGO_INDEX, Scene
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode

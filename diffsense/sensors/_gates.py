@@ -8,12 +8,15 @@ tau > 0. Hard mode is the product of the indicators `margin >= 0` themselves (no
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Literal
 
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
+
+from diffsense.runtime import InputError
 
 Mode = Literal["soft", "hard"]
 MODES: tuple[str, ...] = ("soft", "hard")
@@ -41,8 +44,6 @@ def exp_log_p(log_p: Float[Array, "..."]) -> Float[Array, "..."]:
 
 
 def check_mode(mode: str) -> Mode:
-    from diffsense.errors import InputError
-
     if mode not in MODES:
         raise InputError(f"unknown detection mode {mode!r} (known: soft, hard)")
     return mode  # type: ignore[return-value]
@@ -50,10 +51,6 @@ def check_mode(mode: str) -> Mode:
 
 def check_temperature(temperature):
     """Refuse a concrete temperature that is not a positive finite number (traced: unchecked)."""
-    import math
-
-    from diffsense.errors import InputError
-
     try:
         value = float(temperature)
     except (TypeError, ValueError, jax.errors.ConcretizationTypeError):

@@ -16,10 +16,9 @@ from jaxtyping import Array, Float
 
 from diffsense.scene import CAR, Scene
 from diffsense.sensors._camera import camera_depth_sigma_m, camera_px_per_rad
-from diffsense.sensors._detect import Config, Params, p_detect
 from diffsense.sensors._config import RadarConfig
+from diffsense.sensors._detect import Config, Params, p_detect
 from diffsense.sensors._radar import radar_gain_dbi, radar_rcs_dbsm, radar_snr_db
-
 
 _jit_p_detect = jax.jit(p_detect, static_argnames=("config", "mode"))
 _jit_snr_db = jax.jit(radar_snr_db, static_argnames="config")

@@ -31,6 +31,8 @@ import jax.numpy as jnp
 from jax.scipy.special import log_ndtr
 from jaxtyping import Array, Float
 
+from diffsense.runtime import InputError
+
 RadarLaw = Literal["threshold", "swerling1"]
 CameraLaw = Literal["threshold", "confidence"]
 
@@ -88,8 +90,6 @@ class CameraDetection:
 
 def _require(ok: bool, message: str) -> None:
     if not ok:
-        from diffsense.errors import InputError
-
         raise InputError(message)
 
 

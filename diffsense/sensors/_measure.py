@@ -13,14 +13,14 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from diffsense import _random
-from diffsense.errors import InputError
+from diffsense import runtime
+from diffsense.runtime import InputError
 from diffsense.scene import EGO_INDEX, Scene
-from diffsense.sensors._weather import CLEAR
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import check_mode, check_temperature, p_from_gates
 from diffsense.sensors._geometry import Tracks, to_world
 from diffsense.sensors._mount import mount_of
+from diffsense.sensors._weather import CLEAR
 
 KeyOrNoise = PRNGKeyArray | Float[Array, "2 T V"]
 
@@ -33,10 +33,10 @@ def measurement_noise(key: PRNGKeyArray, scene: Scene) -> Float[Array, "*N 2 T V
     """
     shape, dtype = scene.x_m.shape, scene.x_m.dtype
     if len(shape) == 2:
-        return _random.normal(key, (2, *shape), dtype)
+        return runtime.normal(key, (2, *shape), dtype)
     if len(shape) == 3:
         keys = jax.vmap(lambda n: jax.random.fold_in(key, n))(jnp.arange(shape[0]))
-        return jax.vmap(lambda k: _random.normal(k, (2, *shape[1:]), dtype))(keys)
+        return jax.vmap(lambda k: runtime.normal(k, (2, *shape[1:]), dtype))(keys)
     raise InputError(f"a scene has positions [T, V] or [N, T, V], got shape {shape}")
 
 

@@ -25,16 +25,22 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.scene import EGO_INDEX, Scene
-from diffsense.sensors._camera import _camera_terms
+from diffsense.sensors._camera import Camera, _camera_terms
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import check_mode, check_temperature, p_from_gates
 from diffsense.sensors._geometry import safe_norm, sensor_pose, to_world
+from diffsense.sensors._measure import (
+    KeyOrNoise,
+    _noise,
+    _transposed,
+    own_and_padding,
+    tracks_of,
+)
 from diffsense.sensors._mount import Mount, mount_of
-from diffsense.sensors._measure import KeyOrNoise, _noise, _transposed, own_and_padding, tracks_of
 from diffsense.sensors._params import CameraParams, RadarParams
-from diffsense.sensors._radar import _radar_terms
+from diffsense.sensors._radar import Radar, _radar_terms
 from diffsense.sensors._sensor import Sensor, params_of
 from diffsense.sensors._weather import CLEAR, Weather
 
@@ -104,8 +110,7 @@ def _physics_view(terms, scene: Scene, params, config, noise: KeyOrNoise, mode, 
 def member_view(sensor: Sensor, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode, temperature,
                 weather: Weather = CLEAR) -> tuple[Detections, Covariance]:
     """`sensor`'s Detections [T, V] of `scene` in `weather` with r complete, and their world covariance."""
-    from diffsense.sensors._suite import Camera, Radar  # _suite imports the sensors' physics
-
+    
     if isinstance(sensor, Radar):
         return _physics_view(_radar_terms, scene, params_of(RadarParams, r), sensor.config, noise, mode,
                              temperature, weather)

@@ -17,7 +17,7 @@ from typing import Any
 
 import jax
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 # The envelope, in the ego's body frame. x runs from the rear bumper of the shipped car (4.6 m
 # long: -2.3 m) to the paper's radar mounting (4.2 m: its CarMaker coordinates, which the

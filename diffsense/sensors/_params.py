@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 import jax
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.sensors._mount import MOUNT_DOMAINS
 
 SensorName = Literal["radar", "camera"]

@@ -19,19 +19,28 @@ loss off boresight: HFOV is the beam's -3 dB width, and the SNR law alone sets t
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Any, ClassVar
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from diffsense.scene import Scene
+from diffsense.sensors._config import RadarConfig, load_config, param_specs
 from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._geometry import Tracks, polar, vehicle_occlusion
-from diffsense.sensors._laws import LogProbability, gaussian_beam_loss_db, log_reported_below, swerling1_log_pd
-from diffsense.sensors._mount import mount_of
+from diffsense.sensors._laws import (
+    LogProbability,
+    gaussian_beam_loss_db,
+    log_reported_below,
+    swerling1_log_pd,
+)
 from diffsense.sensors._measure import KeyOrNoise, detect_of, p_detect_of
-from diffsense.sensors._config import RadarConfig
-from diffsense.sensors._params import RadarParams
+from diffsense.sensors._mount import mount_of
+from diffsense.sensors._params import ParamSpec, RadarParams
+from diffsense.sensors._sensor import Sensor, params_of
 from diffsense.sensors._weather import CLEAR, Weather
 
 _SPEED_OF_LIGHT_MPS = 299_792_458.0
@@ -118,3 +127,31 @@ def radar_detect(
 ) -> Detections:
     """Radar `Detections` [T, V]: p_detect and noisy range/azimuth measurements in the world."""
     return detect_of(_radar_terms, scene, params, config, key, mode, temperature, weather)
+
+
+class Radar(Sensor):
+    """The 77 GHz radar: SNR from the radar equation, gain tied to the beam, soft gates.
+
+    `config` holds every constant (`configs/sensors/radar.toml`, or a user TOML via
+    `Radar.from_toml`); its `params` are the defaults of r.
+    """
+
+    config: RadarConfig = eqx.field(static=True)
+    kind: ClassVar[str] = "radar"
+
+    @classmethod
+    def from_toml(cls, path: str | Path | None = None, profile: str = "physical") -> Radar:
+        """The radar of the shipped `profile` ("physical" or "paper"), with the keys of the TOML
+        at `path` (any subset of its constants) replacing the profile's."""
+        return cls(load_config("radar", path, profile))
+
+    def param_specs(self) -> tuple[ParamSpec, ...]:
+        return param_specs("radar", self.config)
+
+    @property
+    def mount_x_m(self) -> float:
+        return float(self.config.mount_x_m)
+
+    def _detect(self, scene: Scene, r: dict[str, Any], noise: KeyOrNoise, mode: Mode, temperature, weather) -> Detections:
+        return radar_detect(scene, params_of(RadarParams, r), self.config, noise, mode=mode, temperature=temperature,
+                            weather=weather)

@@ -13,15 +13,16 @@ Objective protocol: `e2_soft(r, tau) -> E^2 [m^2]` (jax-differentiable in r; tau
 sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, both pure.
 """
 
-from diffsense.solve._bracketed import BracketedSecant
+from diffsense.solve._answer import explain, near_optimal
 from diffsense.solve._box import BoxConfig, BoxResult, box_solve
-from diffsense.solve._pareto import pareto_sweep
 from diffsense.solve._box_fns import BoxFunctions
-from diffsense.solve._evaluator import Evaluator
+from diffsense.solve._bracketed import BracketedSecant
 from diffsense.solve._continuous import LevelResult, SolveConfig, SolveResult, solve
 from diffsense.solve._dense import DenseGrid, basin_check, dense_grid_search
+from diffsense.solve._evaluator import Evaluator
 from diffsense.solve._hard_grid import hard_grid_solve
 from diffsense.solve._implicit import argmin, argmin_derivative
+from diffsense.solve._pareto import pareto_sweep
 from diffsense.solve._steps import (
     PAPER_HFOV_STEPS_DEG,
     SweepPoint,
@@ -46,6 +47,8 @@ __all__ = [
     "SolveResult",
     "SweepPoint",
     "argmin",
+    "explain",
+    "near_optimal",
     "argmin_derivative",
     "basin_check",
     "box_solve",

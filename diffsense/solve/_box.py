@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.solve._box_fns import BoxFunctions, Event
 from diffsense.solve._box_space import _Box, halton
 

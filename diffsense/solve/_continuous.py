@@ -27,7 +27,13 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from diffsense.solve._levels import Counted, e_from_e2, hard_polish_walk, level_bisection, level_secant
+from diffsense.solve._levels import (
+    Counted,
+    e_from_e2,
+    hard_polish_walk,
+    level_bisection,
+    level_secant,
+)
 from diffsense.solve._solve_config import (
     RESERVE_PER_LEVEL,
     LevelResult,

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.solve._steps import check_interval
 
 

@@ -17,9 +17,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense._distributed import to_host
-from diffsense._executables import call
-from diffsense.metrics import ReferenceEvaluation, is_deterministic, value_and_grad
+from diffsense.metrics import (
+    ReferenceEvaluation,
+    breakdown,
+    is_deterministic,
+    tracked_summary,
+    value_and_grad,
+)
+from diffsense.runtime import call, to_host
 from diffsense.solve._solve_config import host_array
 
 
@@ -94,8 +99,6 @@ class Evaluator:
     def breakdown(self, x) -> dict[str, Any]:
         """E_hard at x broken down by scenario, horizon step and coverage, with the "tracked"
         question's figures pooled (`"tracked"`) and per scenario; layout of result.json's."""
-        from diffsense._breakdown import breakdown, tracked_summary
-
         E, hard = self.objective, self.hard(x)
         scenario, weight = to_host((E.data.scenario, E.data.weight))
         out = breakdown(hard, scenario, weight, E.scenario_names, E.spec.horizon_s())

@@ -10,7 +10,14 @@ from typing import Any
 import numpy as np
 
 from diffsense.solve._continuous import SolveResult
-from diffsense.solve._steps import best_step, bracket_around, check_interval, check_steps, default_steps, sweep
+from diffsense.solve._steps import (
+    best_step,
+    bracket_around,
+    check_interval,
+    check_steps,
+    default_steps,
+    sweep,
+)
 
 
 def hard_grid_solve(

@@ -14,6 +14,7 @@ import numpy as np
 from diffsense.solve._bracketed import BracketedSecant
 from diffsense.solve._solve_config import host_array
 
+
 def e_from_e2(e2: Any) -> float:
     return math.sqrt(max(float(e2), 0.0))
 

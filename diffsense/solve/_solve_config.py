@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 from diffsense.solve._steps import SweepPoint
 
 # Gradient evaluations kept back per later continuation level, so an early level cannot spend

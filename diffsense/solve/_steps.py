@@ -13,7 +13,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 # The paper's HFOV steps [deg] (Table III, both sensors).
 PAPER_HFOV_STEPS_DEG = (30.0, 60.0, 90.0, 120.0, 150.0, 180.0)

@@ -27,10 +27,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from diffsense.predictors import CSLSTM_SPEC, InputSpec, PredictorInputs
 from diffsense.scene import SCENE_DT_S, TARGET_INDEX, Scene
-from diffsense.sensors._datatypes import Detections
+from diffsense.sensors import Detections
 from diffsense.tracks._fill import FillPolicy, fill_window
+from diffsense.tracks._spec import CSLSTM_SPEC, InputSpec, PredictorInputs
 
 
 def _frames(spec: InputSpec, scene_dt_s: float) -> tuple[int, int, int]:

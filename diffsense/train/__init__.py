@@ -8,18 +8,27 @@ traffic generator's dataset, validates each epoch, checkpoints every N steps (re
 same result) and writes the weights (msgpack) with a model card (JSON).
 """
 
-from diffsense.train._dataset import (
-    extract_batch, generate_samples, read_dataset, read_meta, read_shard, samples_per_simulation, shard_arrays,
-    simulate_batch, simulation_keys, write_dataset,
-)
-from diffsense.train._samples import LAYOUT_VERSION, DenseSamples, extract_samples
 from diffsense.train._config import DataConfig, OptimConfig, RunConfig, TrainConfig
 from diffsense.train._data import Samples, load_samples, split_by_simulation
+from diffsense.train._dataset import (
+    check_output_dir,
+    extract_batch,
+    generate_samples,
+    read_dataset,
+    read_meta,
+    read_shard,
+    samples_per_simulation,
+    shard_arrays,
+    simulate_batch,
+    simulation_keys,
+    write_dataset,
+)
 from diffsense.train._loop import train
 from diffsense.train._metrics import constant_velocity_m, rmse_per_second
+from diffsense.train._samples import LAYOUT_VERSION, DenseSamples, extract_samples
 
 __all__ = [
-    "LAYOUT_VERSION", "DenseSamples", "extract_batch", "extract_samples", "generate_samples", "read_dataset",
+    "LAYOUT_VERSION", "DenseSamples", "check_output_dir", "extract_batch", "extract_samples", "generate_samples", "read_dataset",
     "read_meta", "read_shard", "samples_per_simulation", "shard_arrays", "simulate_batch", "simulation_keys",
     "write_dataset",
     "DataConfig",

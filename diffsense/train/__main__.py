@@ -1,4 +1,4 @@
-"""`python -m diffsense.train`: the command line in diffsense.cli.train."""
+"""`python -m diffsense.train`: the same as `diffsense train` (the command line is diffsense.cli.train's)."""
 
 from diffsense.cli import run
 from diffsense.cli.train import main

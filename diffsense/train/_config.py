@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 
 @dataclasses.dataclass(frozen=True)

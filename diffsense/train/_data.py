@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from diffsense.errors import InputError
 from diffsense.predictors import HIST_LEN, si_to_model
+from diffsense.runtime import InputError
 
 # The layout's owner reads and checks shards (shapes, dtypes, finiteness, index ranges).
 from diffsense.train._dataset import read_meta, read_shard

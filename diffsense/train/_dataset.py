@@ -24,9 +24,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import PRNGKeyArray
 
-from diffsense._io import atomic_open, register_temporary, release_temporary, write_json
 from diffsense.config import to_dict
-from diffsense.errors import InputError
+from diffsense.runtime import (
+    InputError,
+    atomic_open,
+    register_temporary,
+    release_temporary,
+    write_json,
+)
+from diffsense.scene import TrafficConfig, TrafficTrajectories, simulate_traffic
 from diffsense.train._samples import (
     FUT_LEN,
     GRID_CELL_M,
@@ -38,9 +44,6 @@ from diffsense.train._samples import (
     extract_samples,
     num_instants,
 )
-from diffsense.scene._traffic import simulate_traffic
-from diffsense.scene._traffic_state import TrafficTrajectories
-from diffsense.scene._traffic_config import TrafficConfig
 
 META_FILE = "meta.json"
 SHARD_KEYS = ("hist", "fut", "nbr_hist", "nbr_sample", "nbr_slot", "lat_label", "lon_label", "sim_id")

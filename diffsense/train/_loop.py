@@ -20,15 +20,25 @@ import numpy as np
 import optax
 from flax import nnx, serialization
 
-from diffsense import _io
+from diffsense import runtime
 from diffsense.config import to_dict
-from diffsense.errors import InputError
-from diffsense.predictors import model_to_si, select_mean
-from diffsense.predictors._model import N_LAT, N_LON, new_model
+from diffsense.predictors import (
+    N_LAT,
+    N_LON,
+    model_to_si,
+    new_model,
+    save_weights,
+    select_mean,
+)
+from diffsense.runtime import InputError
 from diffsense.train._config import OptimConfig, TrainConfig
 from diffsense.train._data import Samples, load_samples, split_by_simulation
 from diffsense.train._loss import class_bce, mse, nll
-from diffsense.train._metrics import constant_velocity_m, rmse_per_second, rmse_per_second_by_axis
+from diffsense.train._metrics import (
+    constant_velocity_m,
+    rmse_per_second,
+    rmse_per_second_by_axis,
+)
 
 CHECKPOINT_NAME = "last.msgpack"
 
@@ -133,7 +143,7 @@ def _save_checkpoint(path: Path, cfg: TrainConfig, step: int, leaves, history, w
         "history": serialization.msgpack_serialize(history),
         "leaves": {str(i): np.asarray(x) for i, x in enumerate(leaves)},
     }
-    _io.write_bytes(path, serialization.msgpack_serialize(payload))
+    runtime.write_bytes(path, serialization.msgpack_serialize(payload))
 
 
 def _load_checkpoint(path: Path, cfg: TrainConfig, template_leaves) -> tuple[int, list, list, float, np.ndarray]:
@@ -222,8 +232,6 @@ def train(
     params = fold_position_scale(params, scale)
     fut = _validate(predict, params, val_set, cfg.run.val_batch_size)
     card = _model_card(cfg, params, fut, train_set, val_set, meta, total, epochs, wall, history)
-    from diffsense.predictors._weights import save_weights
-
     save_weights(cfg.run.weights, nnx.merge(graphdef, params), card)
     return card
 

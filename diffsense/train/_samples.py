@@ -49,9 +49,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from diffsense.predictors._protocol import CSLSTM_SPEC
-from diffsense.scene._simulate import SCENE_DT_S
-from diffsense.scene._traffic_state import TrafficTrajectories
+from diffsense.scene import SCENE_DT_S, TrafficTrajectories
+from diffsense.tracks import CSLSTM_SPEC
 
 # The sample layout is the CS-LSTM's input spec (one source: diffsense.predictors.CSLSTM_SPEC).
 LAYOUT_VERSION = 1

@@ -1,7 +1,7 @@
 """Wall time split into JAX compilation and the rest, measured, not estimated.
 
 JAX reports the duration of every trace, lowering and backend compilation through its
-monitoring hooks, and `diffsense._executables` reports each compiled program it loads from disk
+monitoring hooks, and `diffsense.runtime._executables` reports each compiled program it loads from disk
 the same way; `CompileClock` sums them while it is active.
 """
 
@@ -15,7 +15,7 @@ _COMPILE_EVENTS = (
     "/jax/core/compile/jaxpr_trace_duration",
     "/jax/core/compile/jaxpr_to_mlir_module_duration",
     "/jax/core/compile/backend_compile_duration",
-    "/diffsense/executables/load_duration",  # a compiled program loaded (diffsense._executables)
+    "/diffsense/executables/load_duration",  # a compiled program loaded (diffsense.runtime._executables)
 )
 
 _active: list["CompileClock"] = []

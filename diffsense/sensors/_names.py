@@ -2,22 +2,11 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
-from diffsense.errors import InputError
-from diffsense.sensors import Sensor
-
-
-def _finite(value: Any, what: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{what} must be numbers, got {value!r}") from None
-    if not math.isfinite(v):
-        raise InputError(f"{what} must be finite numbers, got {value!r}")
-    return v
+from diffsense.runtime import InputError, finite_number
+from diffsense.sensors._sensor import Sensor
 
 
 def resolve_name(sensor: Sensor, name: str) -> str:
@@ -48,7 +37,7 @@ def resolve_name(sensor: Sensor, name: str) -> str:
     raise InputError(f"unknown {sensor.kind} parameter {name!r} (known: {known})")
 
 
-def _resolve_params(sensor: Sensor, params: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
+def resolve_params(sensor: Sensor, params: Mapping[str, Any]) -> dict[str, tuple[float, float]]:
     if not isinstance(params, Mapping) or not params:
         raise InputError("params must name at least one parameter with its bounds, e.g. {'hfov_deg': (30, 180)}")
     out: dict[str, tuple[float, float]] = {}
@@ -57,7 +46,7 @@ def _resolve_params(sensor: Sensor, params: Mapping[str, Any]) -> dict[str, tupl
         if name in out:
             raise InputError(f"parameter {name} is named twice")
         try:
-            lo, hi = (_finite(b, f"bounds of {name}") for b in bounds)
+            lo, hi = (finite_number(b, f"bounds of {name}") for b in bounds)
         except InputError:  # a bound that is no number, or not finite: its own message
             raise
         except (TypeError, ValueError):

@@ -20,7 +20,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 _ENV = {"coordinator": "JAX_COORDINATOR_ADDRESS", "num_processes": "JAX_NUM_PROCESSES", "process_id": "JAX_PROCESS_ID"}
 

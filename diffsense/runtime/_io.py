@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path, PurePosixPath
 from typing import Any, BinaryIO
 
-from diffsense.errors import InputError
+from diffsense.runtime._errors import InputError
 
 MANIFEST = "manifest.json"
 _MANIFEST_FORMAT = "diffsense-output-set"

@@ -23,7 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from diffsense.errors import InputError
+from diffsense.runtime import InputError
 
 _KEYS = ("sensors", "cost_weight", "description", "params", "sensor_config")
 T = TypeVar("T")

@@ -28,11 +28,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from diffsense._problem import Problem
-from diffsense._result import Result
-from diffsense.errors import InputError
 from diffsense.metrics import Objective, SpeedShiftedScenes, with_scenes
+from diffsense.runtime import InputError
 from diffsense.solve import argmin_derivative
+from diffsense.study._objective import objective, traffic_scenes
+from diffsense.study._problem import Problem
+from diffsense.study._result import Result
 
 WEATHER_PARAMETERS = ("rain_mm_h", "fog_visibility_m")
 ODD_PARAMETERS = (*WEATHER_PARAMETERS, "traffic_speed_kmh")
@@ -74,8 +75,6 @@ def odd_shift(problem: Problem, E: Objective, theta: str) -> Callable[[jax.Array
 
 
 def _speed_scenes(problem: Problem, E: Objective) -> SpeedShiftedScenes:
-    from diffsense._optimise import traffic_scenes
-
     return traffic_scenes(problem, E.spec, E.sensor, E.dtype)[0]
 
 
@@ -90,8 +89,6 @@ def sensitivity(problem: Problem, result: Result, theta: Sequence[str], *, E: Ob
     `E` reuses an already built `diffsense.objective(problem)`. A value is None where the soft
     objective has no strict minimum there (the theorem does not apply).
     """
-    from diffsense._optimise import objective
-
     check_theta(problem, theta)
     if len(result.r_star) != 1:
         raise InputError("sensitivity is implemented for one-parameter problems")

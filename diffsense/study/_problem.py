@@ -14,13 +14,14 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from diffsense._param_names import _finite, _resolve_params
-from diffsense.errors import InputError
+from diffsense import config as cfgio
 from diffsense.metrics import PAPER_SCENARIOS, QUESTIONS, EstimatorConfig
 from diffsense.predictors import COMPUTE_DTYPES, Predictor
-from diffsense.sensors import Sensor, Suite, make_sensor
-from diffsense.sensors._params import ParamSpec
+from diffsense.runtime import InputError, finite_number
+from diffsense.sensors import ParamSpec, Sensor, Suite, make_sensor, resolve_params
 from diffsense.solve import BoxConfig, SolveConfig
+from diffsense.study._settings import load_settings, problem_fields
+from diffsense.study._suite_file import checked, load_suite
 from diffsense.tracks import FILL_POLICIES
 
 _MAX_SEED = 2**32 - 1
@@ -112,12 +113,12 @@ class Problem:
         if isinstance(self.sensor, list):
             set_("sensor", tuple(self.sensor))
         sensor = self.make_sensor()
-        set_("cost_weight", _finite(self.cost_weight, "cost_weight"))
+        set_("cost_weight", finite_number(self.cost_weight, "cost_weight"))
         if self.cost_weight < 0:
             raise InputError(f"cost_weight must be >= 0, got {self.cost_weight:g}")
         if self.fill is None:
             set_("fill", "zero" if self.profile == "paper" else "hold")
-        set_("params", _resolve_params(sensor, self.params))
+        set_("params", resolve_params(sensor, self.params))
         names = self.scenarios.split(",") if isinstance(self.scenarios, str) else list(self.scenarios)
         names = [str(n).strip() for n in names]
         if not names or not all(names):
@@ -145,13 +146,13 @@ class Problem:
                 raise InputError(f"recorded scenes are named 'highd:PATH' or 'ngsim:PATH', got {self.scenes!r}")
             if not Path(path).is_file():
                 raise InputError(f"recorded scenes: {path} is not a file")
-        set_("traffic_speed_offset_kmh", _finite(self.traffic_speed_offset_kmh, "traffic_speed_offset_kmh"))
+        set_("traffic_speed_offset_kmh", finite_number(self.traffic_speed_offset_kmh, "traffic_speed_offset_kmh"))
         if self.scenes is not None and self.traffic_speed_offset_kmh != 0.0:
             raise InputError("recorded scenes have the speeds they were recorded at: traffic_speed_offset_kmh "
                              "applies to simulated scenarios only")
         if self.objective not in QUESTIONS:
             raise InputError(f"unknown objective {self.objective!r} (known: {', '.join(QUESTIONS)})")
-        set_("miss_penalty_m2", _finite(self.miss_penalty_m2, "miss_penalty_m2"))
+        set_("miss_penalty_m2", finite_number(self.miss_penalty_m2, "miss_penalty_m2"))
         if self.miss_penalty_m2 < 0:
             raise InputError(f"miss_penalty_m2 must be >= 0, got {self.miss_penalty_m2:g}")
         if self.fill not in FILL_POLICIES:
@@ -159,7 +160,7 @@ class Problem:
         if self.steps is not None:
             if len(self.params) != 1:
                 raise InputError("steps apply to one-parameter problems only")
-            set_("steps", tuple(_finite(v, "steps") for v in self.steps))
+            set_("steps", tuple(finite_number(v, "steps") for v in self.steps))
         if self.dense_check is not None and len(self.params) > 1:
             raise InputError("dense_check applies to one-parameter problems only")
         if self.dense_check is not None and not (math.isfinite(self.dense_check) and self.dense_check > 0):
@@ -190,17 +191,13 @@ class Problem:
     def from_toml(cls, path: str | Path | None = None, **overrides: Any) -> Problem:
         """A problem from a TOML in the layout of `configs/optimise/default.toml` (None: that
         file). Keys the file leaves out keep the shipped defaults; `overrides` replace fields."""
-        from diffsense._settings import load_settings, problem_fields
-
         return cls(**problem_fields(load_settings(path)) | overrides)
 
     @classmethod
     def from_suite(cls, path: str | Path, **overrides: Any) -> Problem:
         """A suite design problem from a suite file (`configs/suites/*.toml`: its sensors, free
-        parameters with bounds and cost weight; layout in `diffsense._suite_file`). `overrides`
+        parameters with bounds and cost weight; layout in `diffsense.study._suite_file`). `overrides`
         replace fields (scenarios, variants, ...); a refusal names the file."""
-        from diffsense._suite_file import checked, load_suite
-
         fields = load_suite(path)
         return checked(path, lambda: cls(**fields | overrides))
 
@@ -245,3 +242,15 @@ def _suite_with_configs(sensor: Any, configs: Mapping[str, str], profile: str) -
 def _check_int(name: str, value: Any, lo: int, hi: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
         raise InputError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+
+
+def problem_config(problem: Problem) -> dict[str, Any]:
+    """The problem as result.json's `config`: plain values, the sensor and predictor by name."""
+    fields = {f.name: getattr(problem, f.name) for f in dataclasses.fields(problem)}
+    fields["sensor"] = problem.sensor_kind
+    if not isinstance(problem.predictor, str):
+        fields["predictor"] = type(problem.predictor).__name__
+    fields["params"] = {k: list(v) for k, v in problem.params.items()}
+    if isinstance(problem.sensor, tuple):
+        fields["sensor"] = [s if isinstance(s, str) else s.kind for s in problem.sensor]
+    return cfgio.to_dict(fields)

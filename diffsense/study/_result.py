@@ -43,11 +43,11 @@ result.json schema (every key always present; non-finite numbers are written as 
                              at r*: the "tracked" question's pieces (whichever was optimised)
     "sweep" entries also hold "by_scenario" and "coverage" at their step.
     "near_optimal"  {"tolerance_m": m, "intervals": [[lo, hi], ...]}  every evaluated r whose E_hard
-                             is within the tolerance of the best (`diffsense._answer`)
-    "flags"         [string, ...]  "pressing_on_bound", "flat" (`diffsense._answer`)
+                             is within the tolerance of the best (`diffsense.solve._answer`)
+    "flags"         [string, ...]  "pressing_on_bound", "flat" (`diffsense.solve._answer`)
     "domain"        {"factor", "validation_rmse_m": [m at 1..5 s], "scenarios": {name: {"rmse_gt_m":
                              [...], "inside": bool}}, "outside": [names]}  the predictor's domain
-                             check (`diffsense._domain`); a scenario outside it also gets a note
+                             check (`diffsense.study._domain`); a scenario outside it also gets a note
     "box"           only for many parameters (or a cost): {"J_star", "cost", "cost_weight",
                              "gradient" (dJ/dr per parameter at r*: what still matters),
                              "gradient_E", "on_bound" (per parameter), "source", "counts"}
@@ -70,7 +70,7 @@ from typing import Any
 
 import numpy as np
 
-import diffsense
+from diffsense.runtime import __version__
 from diffsense.solve import SolveResult
 
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
@@ -88,7 +88,7 @@ def versions() -> dict[str, str]:
             out[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             out[name] = "not installed"
-    out["diffsense"] = diffsense.__version__
+    out["diffsense"] = __version__
     return out
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from diffsense._distributed import to_host
+from diffsense.runtime import to_host
 
 DOMAIN_FACTOR = 2.0
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from diffsense.metrics import COVERAGE_PARTS, coverage_parts
+from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
 
 
 def _rms(sq: np.ndarray, w: np.ndarray) -> float:

@@ -141,7 +141,7 @@ def _sources() -> str:
     global _source_digest
     if _source_digest is None:
         digest = hashlib.sha256()
-        root = Path(__file__).parent
+        root = Path(__file__).parents[1]  # the diffsense package, not this folder
         for path in sorted(root.rglob("*.py")):
             digest.update(str(path.relative_to(root)).encode())
             digest.update(path.read_bytes())

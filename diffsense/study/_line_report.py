@@ -10,14 +10,12 @@ from typing import Any
 import jax
 import numpy as np
 
-from diffsense._breakdown import breakdown, tracked_summary
-from diffsense._distributed import to_host
-from diffsense._executables import call
-from diffsense._problem import Problem
-from diffsense._result import Curves
-from diffsense.metrics import Objective
+from diffsense.metrics import Objective, breakdown, tracked_summary
+from diffsense.runtime import call, to_host
 from diffsense.scene import ROLE_NAMES
 from diffsense.solve import Evaluator, basin_check, dense_grid_search
+from diffsense.study._problem import Problem
+from diffsense.study._result import Curves
 
 
 def first_variant(scenes):

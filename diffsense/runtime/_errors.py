@@ -8,6 +8,9 @@ like any `ValueError`.
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 
 class InputError(ValueError):
     """Bad user input: one line that names the problem (the CLI exits with code 2)."""
@@ -15,3 +18,14 @@ class InputError(ValueError):
     def __init__(self, message: str):
         # One line, always: a multi-line message would read like a traceback.
         super().__init__(" ".join(str(message).split()))
+
+
+def finite_number(value: Any, what: str) -> float:
+    """`value` as a finite float; InputError naming `what` otherwise."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be numbers, got {value!r}") from None
+    if not math.isfinite(v):
+        raise InputError(f"{what} must be finite numbers, got {value!r}")
+    return v

@@ -17,16 +17,20 @@ from typing import Any
 
 import numpy as np
 
-from diffsense._distributed import to_host
-
-from diffsense._breakdown import breakdown
-from diffsense._domain import domain_check, domain_note
-from diffsense._problem import Problem
-from diffsense._result import Result
-from diffsense._timing import CompileClock
-from diffsense.errors import InputError
-from diffsense.metrics import Objective, is_deterministic
+from diffsense.metrics import (
+    Objective,
+    breakdown,
+    is_deterministic,
+    load_costs,
+    make_cost,
+)
+from diffsense.runtime import CompileClock, InputError, to_host
 from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, pareto_sweep
+from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._line_report import reference_summary
+from diffsense.study._objective import objective
+from diffsense.study._problem import Problem, problem_config
+from diffsense.study._result import Result
 
 # The cost weights a front is traced at by default [m per currency unit]: from E alone (0) to
 # 0.05 m per EUR, where the shipped sensors' price range (their defaults cost 132 EUR together)
@@ -39,8 +43,6 @@ OnEvaluation = Callable[[dict], None] | None
 
 def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, planned: int):
     """The Evaluator, the box functions (cost model included) and the clipped default start."""
-    from diffsense.metrics._cost import load_costs, make_cost
-
     ev = Evaluator(E)
     # Under a probabilistic detection law answers are judged on E_ref, the expectation the
     # estimator approximates (as the one-parameter solve does); under the threshold law it is E_hard.
@@ -71,9 +73,6 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     """Many parameters (or a cost): the box solve (`diffsense.solve.box_solve`): a coarse hard
     sample, BFGS with temperature continuation from its best points, every answer checked on the
     hard objective J = E_hard + cost_weight * cost."""
-    from diffsense._line_report import reference_summary
-    from diffsense._optimise import _config, objective
-
     with CompileClock() as clock:
         say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
         E = objective(problem, predictor=predictor) if E is None else E
@@ -95,7 +94,7 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
                 "programs_lowered": clock.lowered},
-        scenarios=tuple(E.scenario_names), config=_config(problem), domain=domain, box_notes=notes, **parts)
+        scenarios=tuple(E.scenario_names), config=problem_config(problem), domain=domain, box_notes=notes, **parts)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -161,9 +160,6 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
     ascending; `problem.cost_weight` is not used), each warm-started from the previous answer.
     `E`, `predictor`, `progress` and `on_evaluation` as for `diffsense.optimise`; the events also
     carry "cost", the cost of the evaluated point."""
-    from diffsense._optimise import objective
-    from diffsense.metrics._cost import load_costs
-
     lambdas = check_lambdas(lambdas)
     say = progress or (lambda message: None)
     t0 = time.perf_counter()

@@ -8,10 +8,9 @@ from pathlib import Path
 from typing import Any
 
 from diffsense import config as cfgio
-from diffsense._param_names import resolve_name
-from diffsense.errors import InputError
 from diffsense.metrics import PAPER_SCENARIOS, EstimatorConfig
-from diffsense.sensors import make_sensor
+from diffsense.runtime import InputError
+from diffsense.sensors import make_sensor, resolve_name
 from diffsense.solve import SolveConfig
 
 

@@ -1,1 +1,0 @@
-"""The old name of diffsense.sensors, kept so that `python -m diffsense.sensor` still works."""

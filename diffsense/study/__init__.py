@@ -1,0 +1,43 @@
+"""A user's problem and the jobs run on it: what is asked, and the answer with how sure it is.
+
+    problem = Problem(sensor="radar", params={"hfov_deg": (30.0, 180.0)}, scenarios=["sc01"])
+    E = objective(problem)                 # E(r) [m]: a pure equinox Module
+    result = optimise(problem)             # the main job: a `Result`
+    front = pareto(Problem.from_suite("configs/suites/radar_camera_d4.toml"))
+    sensitivity(problem, result, ["rain_mm_h"])   # dr*/dtheta at the answer
+"""
+
+from diffsense.study._box_job import DEFAULT_LAMBDAS, ParetoFront, check_lambdas, pareto
+from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._line_job import planned_evaluations
+from diffsense.study._objective import (
+    memory_estimate_bytes,
+    objective,
+    seed_keys,
+    traffic_scenes,
+)
+from diffsense.study._optimise import optimise
+from diffsense.study._problem import WEATHER_DOMAINS, Problem, problem_config
+from diffsense.study._result import Curves, Result
+from diffsense.study._sensitivity import (
+    ODD_PARAMETERS,
+    WEATHER_PARAMETERS,
+    check_theta,
+    odd_shift,
+    sensitivity,
+)
+from diffsense.study._settings import (
+    Settings,
+    load_settings,
+    problem_fields,
+    shared_fields,
+)
+from diffsense.study._suite_file import checked, load_suite
+
+__all__ = [
+    "DEFAULT_LAMBDAS", "ODD_PARAMETERS", "WEATHER_DOMAINS", "WEATHER_PARAMETERS", "Curves", "ParetoFront",
+    "Problem", "Result", "Settings", "check_lambdas", "check_theta", "checked", "domain_check", "domain_note",
+    "load_settings", "load_suite", "memory_estimate_bytes", "objective", "odd_shift", "optimise", "pareto",
+    "planned_evaluations", "problem_config", "problem_fields", "seed_keys", "sensitivity", "shared_fields",
+    "traffic_scenes",
+]

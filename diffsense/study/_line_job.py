@@ -1,0 +1,124 @@
+"""The one-parameter job: the stepped sweep on E_hard, the continuous solve inside the best step's
+bracket, and what the figures and the breakdown need, gathered into a `Result`."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any
+
+import jax.numpy as jnp
+
+from diffsense.metrics import Objective, is_deterministic
+from diffsense.runtime import CompileClock
+from diffsense.solve import (
+    Evaluator,
+    default_steps,
+    hard_grid_solve,
+    near_optimal,
+    solve,
+)
+from diffsense.study import _line_report as report
+from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._objective import objective
+from diffsense.study._problem import Problem, problem_config
+from diffsense.study._result import Result
+
+Progress = Callable[[str], None]
+
+
+def planned_evaluations(problem: Problem, sweep_soft: bool = True) -> int:
+    """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check).
+    `sweep_soft` False: the sweep reads E_soft off its E_ref (straight-through under a
+    probabilistic law), one program per step instead of two."""
+    (lo, hi), = problem.params.values()
+    steps = len(problem.steps) if problem.steps is not None else len(default_steps(lo, hi))
+    dense = 0 if problem.dense_check is None else int(math.ceil((hi - lo) / problem.dense_check - 1e-9)) + 1
+    sweep_programs = (2 if sweep_soft else 1) * steps
+    return sweep_programs + problem.solve.max_evaluations + 2 + problem.extra_curve_points * 2 + dense
+
+
+def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progress,
+               on_evaluation: Callable[[dict], None] | None, figures: bool) -> tuple[Objective, Evaluator]:
+    """The problem's objective (built unless given) and its memoising, counting evaluator."""
+    say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
+        "ground-truth predictions")
+    E = objective(problem, predictor=predictor) if E is None else E
+    # the figures draw E_soft and its slope at the sweep's steps: value-and-gradients either way
+    planned = planned_evaluations(problem, sweep_soft=figures or not _soft_value_is_e_ref(E))
+
+    def counted(kind: str, e_m: float, tau: float) -> None:
+        if on_evaluation is not None:
+            done = sum(ev.counts.values()) + ev.reference_count
+            on_evaluation({"kind": kind, "E_m": e_m, "tau": tau, "done": done, "planned": planned})
+
+    ev = Evaluator(E, progress=counted)
+    return E, ev
+
+
+def _soft_value_is_e_ref(E: Objective) -> bool:
+    """Straight-through under a probabilistic law: E_soft's value is E_ref itself, so the sweep
+    reads it off its E_ref evaluation rather than running a value-and-gradient program, and
+    every gradient evaluation's point is an answer candidate."""
+    return E.estimator_kind == "straight-through" and not is_deterministic(E.sensor)
+
+
+def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
+    """The sweep and the continuous solve (the inner hard grid for the hard estimator) of a
+    one-parameter problem, the answer judged on E_hard or, under a probabilistic law, E_ref."""
+    (_, (lo, hi)), = problem.params.items()
+    if problem.estimator.kind == "hard":
+        return hard_grid_solve(ev.e_hard, (lo, hi), steps=problem.steps, max_evaluations=problem.solve.max_evaluations)
+    e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
+    # Under a probabilistic detection law the sweep, the answer and the polish are judged on
+    # E_ref, the expectation the estimator approximates; under the threshold law E_ref is E_hard.
+    e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
+    return solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
+                 value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref",
+                 soft_value_is_answer=_soft_value_is_e_ref(ev.objective))
+
+
+def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures: bool, say: Progress,
+                   on_evaluation: Callable[[dict], None] | None) -> tuple[Result, Objective]:
+    """`optimise` of a one-parameter problem (its docstring), and the objective it built or was given."""
+    (name, (lo, hi)), = problem.params.items()
+    spec = problem.specs()[name]
+    hard_only = problem.estimator.kind == "hard"
+    with CompileClock() as clock:
+        E, ev = _evaluator(problem, E, predictor, say, on_evaluation, figures)
+        on_hard = hard_only or is_deterministic(E.sensor)
+        domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
+        if domain_note(domain):
+            say("warning: " + domain_note(domain))
+        say(f"{problem.sensor_kind}: stepped sweep and {'hard grid' if hard_only else 'continuous solve'} "
+            f"of {name} over [{lo:g}, {hi:g}] {spec.unit}")
+        result = _solve_line(ev, problem, on_hard)
+        solve_counts = dict(ev.counts)
+        say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, "
+            f"{'E_hard' if on_hard else 'E_ref'}(r*) = {result.E_hard_star:.4f} m")
+        curves = report.curves(ev, E, result, lo, hi, problem.extra_curve_points, hard_only) if figures else None
+        parts = report.breakdowns(ev, E, result, problem.miss_penalty_m2)
+    figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
+    dense = None
+    if problem.dense_check is not None:
+        say(f"{problem.sensor_kind}: dense reference grid every {problem.dense_check:g} {spec.unit}")
+        dense = report.dense_check(ev, result, lo, hi, problem.dense_check)
+        result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + dense["verdict"]))
+    if domain_note(domain):
+        result = dataclasses.replace(result, notes=(*result.notes, domain_note(domain)))
+    answered = [(x[0], ev.e_hard(x[0])) for x in ev.hard_points()] if on_hard else \
+        [(x[0], ev.e_reference(x[0])) for x in ev.reference_points()]
+    answer = near_optimal(answered, lo, hi, result.r_star)
+    out = Result(
+        sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
+        r_star={name: float(result.r_star)}, E_hard_star=ev.e_hard(result.r_star),
+        E_soft_star=float(result.E_soft_star), solve=result,
+        programs_run={"solve": solve_counts, "figures": figure_counts},
+        wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
+                "programs_lowered": clock.lowered},
+        scenarios=tuple(E.scenario_names),
+        config=problem_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
+        flags=tuple(answer["flags"]), domain=domain, reference=report.reference_summary(ev, problem, result.r_star, on_hard),
+        **parts)
+    return out, E

@@ -1,0 +1,116 @@
+"""E(r) of a problem: its scenes simulated (or read), its sensor and predictor built, its draws fixed.
+
+    E = objective(problem)        # a pure equinox Module: E(r) [m], r a dict of named parameters
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from diffsense.metrics import (
+    Objective,
+    SpeedShiftedScenes,
+    make_objective,
+    recorded_scenes,
+    speed_shifted_scenes,
+)
+from diffsense.predictors import (
+    CastPredictor,
+    CSLSTMPredictor,
+    load_predictor,
+    with_compute_dtype,
+)
+from diffsense.runtime import call
+from diffsense.scene import load_scenario
+from diffsense.sensors import Weather, relevance_stand_ins
+from diffsense.study._problem import Problem
+from diffsense.tracks import prediction_frames
+
+
+def _precision(float64: bool):
+    # The problem asks for float64: JAX computes in float32 unless x64 is on, which would make
+    # dE/dr silently wrong on flat objectives, so it is switched on here.
+    if float64 and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+    return jnp.float64 if float64 else jnp.float32
+
+
+def _predictor(problem: Problem):
+    if isinstance(problem.predictor, str):
+        return load_predictor(problem.predictor or None)
+    return problem.predictor
+
+
+def _in_dtype(predictor: Any, predictor_dtype: str, dtype) -> Any:
+    """The predictor computing in `predictor_dtype` ("auto": the CS-LSTM in float32, the precision
+    of its weights; any other predictor in E's own `dtype`)."""
+    if predictor_dtype == "auto":
+        inner = predictor.inner if isinstance(predictor, CastPredictor) else predictor
+        predictor_dtype = "float32" if isinstance(inner, CSLSTMPredictor) else jnp.dtype(dtype).name
+    return with_compute_dtype(predictor, predictor_dtype) if predictor_dtype != jnp.dtype(dtype).name else predictor
+
+
+def objective(problem: Problem, *, predictor: Any = None) -> Objective:
+    """E(r) of `problem`: the scenarios simulated, the sensor and predictor loaded, every random
+    draw fixed by `problem.seed`. `predictor` (optional) replaces `problem.predictor` (an
+    already loaded one, to load it once for several problems)."""
+    dtype = _precision(problem.float64)
+    sensor = problem.make_sensor()
+    predictor = _predictor(problem) if predictor is None else predictor
+    predictor = _in_dtype(predictor, problem.predictor_dtype, dtype)
+    noise_key = seed_keys(problem.seed)[1]  # [0] is the scenes' (traffic_scenes)
+    if problem.scenes is not None:
+        scenes, index, names, weather = recorded_scenes(
+            problem.scenes, spec=predictor.spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
+            stride_frames=problem.prediction_stride_frames,
+            dtype=dtype)
+    else:
+        shifted, index, names, weather = traffic_scenes(problem, predictor.spec, sensor, dtype)
+        scenes = shifted.base
+    frames = prediction_frames(scenes.num_frames, problem.prediction_stride_frames, predictor.spec, scenes.dt_s)
+    return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
+                          fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names,
+                          question=problem.objective, miss_penalty_m2=problem.miss_penalty_m2,
+                          weather=weather if problem.weather is None else Weather(**problem.weather))
+
+
+def _split_seed(seed: int) -> tuple[jax.Array, jax.Array]:
+    return tuple(jax.random.split(jax.random.PRNGKey(seed)))
+
+
+def seed_keys(seed: int) -> tuple[jax.Array, jax.Array]:
+    """(the scenes' key, the detection draws' key) of a problem's `seed`: `jax.random.split` of
+    `jax.random.PRNGKey(seed)`, bit for bit, as one compiled program that a warm run loads from
+    disk (done op by op, it is five small programs traced and lowered on every run)."""
+    return call(_split_seed, seed)
+
+
+def traffic_scenes(problem: Problem, spec, sensor, dtype) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
+    """The problem's simulated scenes as a function of the traffic speed (`objective` evaluates
+    them at the problem's own; `diffsense.sensitivity` differentiates them)."""
+    scene_key = seed_keys(problem.seed)[0]
+    return speed_shifted_scenes(
+        problem.scenarios, problem.variants, scene_key, spec=spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
+        stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
+        dtype=dtype, speed_offset_kmh=problem.traffic_speed_offset_kmh)
+
+
+def memory_estimate_bytes(problem: Problem) -> int:
+    """An upper estimate of the fixed data `objective(problem)` allocates [bytes]: scenes and noise
+    draws, and the Monte-Carlo estimator's uniforms (N variants x K samples x T frames x V
+    vehicles), which dominate for large K. V is bounded by every vehicle a scenario defines."""
+    if problem.scenes is not None:
+        return 0  # a recording's size is known only once it is read
+    itemsize = 8 if problem.float64 else 4
+    total = 0
+    for name in problem.scenarios:
+        sc = load_scenario(name)
+        frames = int(round(sc.duration_s / 0.1)) + 1
+        vehicles = 5 + (problem.background_vehicles or sc.background.count)
+        k = problem.estimator.samples if problem.estimator.kind == "mc" else 0
+        total += problem.variants * frames * vehicles * itemsize * (k + 20)  # ~20 per-frame fields
+    return total

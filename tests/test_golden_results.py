@@ -1,0 +1,58 @@
+"""The main job's answers do not move when the code is reorganised: two small problems' result.json,
+stored by the command line before the package was restructured (tests/golden/), must come back
+equal, every number of it (r*, E_hard, E_soft, every sweep step, the breakdown, the evaluation
+counts, the problem's config), bit for bit.
+
+Same config and seed, same result: a difference here is a change of behaviour, never noise. A change
+that is meant to move the numbers (new physics, a new default) re-stores the files and says so.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+GOLDEN = Path(__file__).parent / "golden"
+ROOT = Path(__file__).resolve().parents[1]
+
+# The keys that describe the run rather than its answer: timings and the installed versions.
+NOT_ANSWERS = ("wall_s", "versions")
+
+CASES = {
+    "line": ["--param", "hfov", "--interval", "30", "180", "--scenarios", "sc01,sc04", "--variants", "2"],
+    "box": ["--suite", "configs/suites/radar_camera_d4.toml", "--scenarios", "sc01", "--variants", "1"],
+}
+
+
+def _differences(got, want, path="") -> list[str]:
+    """Every place where `got` differs from `want` (a float must be the same float)."""
+    if isinstance(want, dict):
+        if not isinstance(got, dict) or set(got) != set(want):
+            return [f"{path}: keys {sorted(got) if isinstance(got, dict) else got!r} != {sorted(want)}"]
+        return [d for k in want for d in _differences(got[k], want[k], f"{path}.{k}")]
+    if isinstance(want, list):
+        if not isinstance(got, list) or len(got) != len(want):
+            return [f"{path}: {got!r} != {want!r}"]
+        return [d for i, (g, w) in enumerate(zip(got, want)) for d in _differences(g, w, f"{path}[{i}]")]
+    return [] if got == want and type(got) is type(want) else [f"{path}: {got!r} != {want!r}"]
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_result_json_is_the_stored_one(case, tmp_path):
+    # The answer a user gets: XLA's full optimisation (the suite compiles at level 0, whose
+    # float32 arithmetic rounds differently), and no persistent cache the suite did not make.
+    env = dict(os.environ, JAX_DISABLE_MOST_OPTIMIZATIONS="0", DIFFSENSE_NO_CACHE="1")
+    done = subprocess.run([sys.executable, "-m", "diffsense.optimise", *CASES[case], "--out", str(tmp_path), "--quiet"],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    got = json.loads((tmp_path / "result.json").read_text())
+    want = json.loads((GOLDEN / f"{case}_result.json").read_text())
+    for key in NOT_ANSWERS:
+        got.pop(key, None)
+    differences = _differences(got, want)
+    assert not differences, f"{len(differences)} differences, the first: " + "; ".join(differences[:5])
