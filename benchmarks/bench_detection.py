@@ -269,7 +269,7 @@ def main_job(args) -> list[dict]:
     out = []
     for law in (None, _law(args)):
         problem = ds.Problem(sensor=args.sensor, sensor_config=law)
-        problem = dataclasses.replace(problem, estimator=dataclasses.replace(problem.estimator, reference_draws=args.draws))
+        problem = problem.replace(estimator=dataclasses.replace(problem.question.estimator, reference_draws=args.draws))
         t0 = time.perf_counter()
         E = ds.objective(problem)
         result = ds.optimise(problem, E=E, figures=False)

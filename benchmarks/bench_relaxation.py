@@ -140,12 +140,12 @@ def solves(args, seed, grids) -> list[dict]:
             problem = _problem(args, args.law, seed=seed, params={_param(args): (lo, hi)}, estimator=est)
             if args.tau_schedule:
                 schedule = tuple(float(v) for v in args.tau_schedule.split(","))
-                problem = dataclasses.replace(problem, solve=dataclasses.replace(problem.solve, tau_schedule=schedule))
+                problem = problem.replace(solve=dataclasses.replace(problem.solver.solve, tau_schedule=schedule))
             t0 = time.perf_counter()
             events = []
             result = ds.optimise(problem, figures=False, on_evaluation=events.append)
             ref = result.reference
-            row = {"seed": seed, "interval": text, "estimator": args.estimator, "lambda": lam, "tau_schedule": list(problem.solve.tau_schedule),
+            row = {"seed": seed, "interval": text, "estimator": args.estimator, "lambda": lam, "tau_schedule": list(problem.solver.solve.tau_schedule),
                    "grid_best_E_ref": best,
                    "r_star": next(iter(result.r_star.values())), "E_ref_star": ref["E_ref_star"],
                    "E_ref_star_se": ref["E_ref_star_se"], "rel_to_grid_best": ref["E_ref_star"] / best - 1.0,

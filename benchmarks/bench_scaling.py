@@ -124,10 +124,10 @@ def worker(args) -> dict:
     r = {name: jax.numpy.asarray(at, objective.dtype) for name, at in zip(problem.params, args.at, strict=True)}
     fns, compile_s = _programs(objective, r)
     median_s = _time_interleaved(fns, args.repeats, pause_s=0.0)
-    scenes = args.worker_variants * len(problem.scenarios)
+    scenes = args.worker_variants * len(problem.traffic.scenarios)
     return {
         "devices": jax.device_count(), "sharded_over": len(objective.data.weight.sharding.device_set),
-        "variants": args.worker_variants, "scenarios": len(problem.scenarios), "scenes": scenes,
+        "variants": args.worker_variants, "scenarios": len(problem.traffic.scenarios), "scenes": scenes,
         "dtype": str(objective.dtype), "platform": jax.devices()[0].platform, "build_s": build_s,
         "compile_value_s": compile_s["value"], "compile_value_and_grad_s": compile_s["value_and_grad"],
         "value_s": median_s["value"], "value_and_grad_s": median_s["value_and_grad"],

@@ -126,7 +126,7 @@ def default_problem(model: str | None = None, scenarios: Sequence[str] | None = 
         changes["variants"] = variants
     if interval is not None:
         changes["params"] = {interval_name(base): (float(interval[0]), float(interval[1]))}
-    return dataclasses.replace(base, **changes) if changes else base
+    return base.replace(**changes) if changes else base
 
 
 def interval_name(problem) -> str:
@@ -151,23 +151,23 @@ def settings(problem, quick: bool = False, mc_samples: Sequence[int] = MC_SAMPLE
     tried (besides the hard estimator and the other float type).
     """
     replace = dataclasses.replace
-    p, s = problem, problem.solve
+    p, s = problem, problem.solver.solve
     mc = () if quick else tuple(mc_samples)
     taus = (2.0,) if quick else tuple(taus)
     variants = (2,) if quick else tuple(variants)
-    est = p.estimator
+    est = p.question.estimator
     rows = [Setting("default", f"{est.kind}, tau {s.tau_schedule[-1]:g}, "
-                               f"{'float64' if p.float64 else 'float32'}, {p.variants} var", p)]
+                               f"{'float64' if p.prediction.float64 else 'float32'}, {p.traffic.variants} var", p)]
     for k in mc:
-        rows.append(Setting("estimator", f"mc K={k}", replace(p, estimator=replace(est, kind="mc", samples=k))))
-    rows.append(Setting("estimator", "hard", replace(p, estimator=replace(est, kind="hard"))))
+        rows.append(Setting("estimator", f"mc K={k}", p.replace(estimator=replace(est, kind="mc", samples=k))))
+    rows.append(Setting("estimator", "hard", p.replace(estimator=replace(est, kind="hard"))))
     for tau in taus:
-        rows.append(Setting("temperature", f"tau {tau:g}", replace(p, solve=with_final_tau(s, tau))))
-    other = "float32" if p.float64 else "float64"
-    rows.append(Setting("precision", other, replace(p, float64=not p.float64, solve=replace(s, dtype=other))))
+        rows.append(Setting("temperature", f"tau {tau:g}", p.replace(solve=with_final_tau(s, tau))))
+    other = "float32" if p.prediction.float64 else "float64"
+    rows.append(Setting("precision", other, p.replace(float64=not p.prediction.float64, solve=replace(s, dtype=other))))
     for n in variants:
-        if n != p.variants:
-            rows.append(Setting("variants", f"{n} var", replace(p, variants=n)))
+        if n != p.traffic.variants:
+            rows.append(Setting("variants", f"{n} var", p.replace(variants=n)))
     return rows
 
 
@@ -177,10 +177,10 @@ def objective_key(problem) -> tuple:
     the estimator's settings."""
     from diffsense.metrics import EstimatorConfig
 
-    estimator = EstimatorConfig() if problem.estimator.kind == "hard" else problem.estimator
-    predictor = problem.predictor if isinstance(problem.predictor, str) else id(problem.predictor)
-    return (problem.sensor_kind, tuple(problem.scenarios), problem.variants, problem.seed, predictor,
-            problem.fill, estimator, problem.prediction_stride_frames, problem.background_vehicles, problem.float64)
+    estimator = EstimatorConfig() if problem.question.estimator.kind == "hard" else problem.question.estimator
+    predictor = problem.prediction.predictor if isinstance(problem.prediction.predictor, str) else id(problem.prediction.predictor)
+    return (problem.sensor_kind, tuple(problem.traffic.scenarios), problem.traffic.variants, problem.seed, predictor,
+            problem.prediction.fill, estimator, problem.traffic.prediction_stride_frames, problem.traffic.background_vehicles, problem.prediction.float64)
 
 
 def interval_of(problem) -> tuple[float, float]:
@@ -194,8 +194,8 @@ def reference(problem, predictor, variants: int, grid_step: float) -> Reference:
     from diffsense import report, solve
     from diffsense.metrics import EstimatorConfig
 
-    estimator = EstimatorConfig() if problem.estimator.kind == "hard" else problem.estimator
-    ref_problem = dataclasses.replace(problem, variants=variants, estimator=estimator)
+    estimator = EstimatorConfig() if problem.question.estimator.kind == "hard" else problem.question.estimator
+    ref_problem = problem.replace(variants=variants, estimator=estimator)
     with report.CompileClock() as clock:
         ev = solve.Evaluator(ds.objective(ref_problem, predictor=predictor))
         dense = solve.dense_grid_search(ev.e_hard, interval_of(problem), grid_step)
@@ -249,12 +249,12 @@ def evaluation_cost(problem, predictor, samples: Sequence[int]) -> list[tuple[st
     from diffsense import report, solve
 
     lo, hi = interval_of(problem)
-    tau = problem.solve.tau_schedule[-1]
+    tau = problem.solver.solve.tau_schedule[-1]
     out = []
     for k in samples:
-        est = dataclasses.replace(problem.estimator, kind="mc", samples=k)
+        est = dataclasses.replace(problem.question.estimator, kind="mc", samples=k)
         with report.CompileClock() as clock:
-            ev = solve.Evaluator(ds.objective(dataclasses.replace(problem, estimator=est), predictor=predictor))
+            ev = solve.Evaluator(ds.objective(problem.replace(estimator=est), predictor=predictor))
             ev.value_and_grad(0.5 * (lo + hi), tau)  # compiles
         t0 = time.perf_counter()
         ev.value_and_grad(0.5 * (lo + hi) + 1.0, tau)  # a new point: not memoised
@@ -298,7 +298,7 @@ def to_json(problem, rows: Sequence[Row], ref: Reference, costs) -> dict:
     lo, hi = interval_of(problem)
     return {
         "problem": {"sensor": problem.sensor_kind, "param": interval_name(problem), "interval": [lo, hi],
-                    "scenarios": list(problem.scenarios), "variants": problem.variants},
+                    "scenarios": list(problem.traffic.scenarios), "variants": problem.traffic.variants},
         "reference": {"variants": ref.variants, "grid_step": ref.grid_step, "evaluations": ref.dense.evaluations,
                       "compile_s": ref.compile_s, "run_s": ref.run_s, "r_star": ref.r_star, "E_star": ref.E_star,
                       "r": [float(v) for v in ref.dense.r], "E_hard": [float(v) for v in ref.dense.E_hard]},

@@ -1,6 +1,7 @@
 """A user's problem and the jobs run on it: what is asked, and the answer with how sure it is.
 
     problem = Problem(sensor="radar", params={"hfov_deg": (30.0, 180.0)}, scenarios=["sc01"])
+    problem.sensing.built, problem.traffic.variants   # its specs: one per stage (`TrafficSpec`, ...)
     E = objective(problem)                 # E(r) [m]: a pure equinox Module
     result = optimise(problem)             # the main job: a `Result`
     front = pareto(Problem.from_suite("configs/suites/radar_camera_d4.toml"))
@@ -17,7 +18,7 @@ from diffsense.study._objective import (
     traffic_scenes,
 )
 from diffsense.study._optimise import optimise
-from diffsense.study._problem import WEATHER_DOMAINS, Problem, problem_config
+from diffsense.study._problem import Problem, problem_config
 from diffsense.study._result import Curves, Result
 from diffsense.study._sensitivity import (
     ODD_PARAMETERS,
@@ -32,12 +33,20 @@ from diffsense.study._settings import (
     problem_fields,
     shared_fields,
 )
+from diffsense.study._specs import (
+    WEATHER_DOMAINS,
+    PredictionSpec,
+    QuestionSpec,
+    SensingSpec,
+    SolverSpec,
+    TrafficSpec,
+)
 from diffsense.study._suite_file import checked, load_suite
 
 __all__ = [
     "DEFAULT_LAMBDAS", "ODD_PARAMETERS", "WEATHER_DOMAINS", "WEATHER_PARAMETERS", "Curves", "ParetoFront",
-    "Problem", "Result", "Settings", "check_lambdas", "check_theta", "checked", "domain_check", "domain_note",
-    "load_settings", "load_suite", "memory_estimate_bytes", "objective", "odd_shift", "optimise", "pareto",
-    "planned_evaluations", "problem_config", "problem_fields", "seed_keys", "sensitivity", "shared_fields",
-    "traffic_scenes",
+    "PredictionSpec", "Problem", "QuestionSpec", "Result", "SensingSpec", "Settings", "SolverSpec", "TrafficSpec",
+    "check_lambdas", "check_theta", "checked", "domain_check", "domain_note", "load_settings", "load_suite",
+    "memory_estimate_bytes", "objective", "odd_shift", "optimise", "pareto", "planned_evaluations",
+    "problem_config", "problem_fields", "seed_keys", "sensitivity", "shared_fields", "traffic_scenes",
 ]

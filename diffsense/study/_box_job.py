@@ -47,7 +47,7 @@ def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, plan
     # Under a probabilistic detection law answers are judged on E_ref, the expectation the
     # estimator approximates (as the one-parameter solve does); under the threshold law it is E_hard.
     e_answer = None if _on_hard(problem, E) else ev.e_reference
-    fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.costs), E.sensor), e_answer=e_answer)
+    fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.question.costs), E.sensor), e_answer=e_answer)
     if on_evaluation is not None:
         def listen(event) -> None:  # what a progress display shows: E, the cost there, the count
             done = sum(fns.counts.values())
@@ -62,11 +62,20 @@ def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, plan
 
 def _on_hard(problem: Problem, E: Objective) -> bool:
     """Whether answers are judged on E_hard (the threshold law, or the hard estimator) or on E_ref."""
-    return problem.estimator.kind == "hard" or is_deterministic(E.sensor)
+    return problem.question.estimator.kind == "hard" or is_deterministic(E.sensor)
+
+
+def _simulating(problem: Problem) -> str:
+    return f"{problem.sensor_kind}: simulating {len(problem.traffic.scenarios)} scenarios x {problem.traffic.variants} variants"
+
+
+def _units(problem: Problem) -> dict[str, str]:
+    return {n: s.unit for n, s in problem.sensing.specs.items()}
 
 
 def _planned(problem: Problem, solves: int = 1) -> int:
-    return solves * problem.box.max_soft + (problem.box.samples or 2 * len(problem.params) + 2)
+    box = problem.solver.box
+    return solves * box.max_soft + (box.samples or 2 * len(problem.params) + 2)
 
 
 def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say, on_evaluation: OnEvaluation) -> Result:
@@ -74,13 +83,13 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     sample, BFGS with temperature continuation from its best points, every answer checked on the
     hard objective J = E_hard + cost_weight * cost."""
     with CompileClock() as clock:
-        say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
+        say(_simulating(problem))
         E = objective(problem, predictor=predictor) if E is None else E
         ev, fns, start = _functions(problem, E, on_evaluation, _planned(problem))
         domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
         say(f"{problem.sensor_kind}: box solve of {', '.join(problem.params)}")
-        box = box_solve(fns, problem.params, dataclasses.replace(problem.box, cost_weight=problem.cost_weight,
-                                                                  seed=problem.seed), extra_starts=[start])
+        config = dataclasses.replace(problem.solver.box, cost_weight=problem.question.cost_weight, seed=problem.seed)
+        box = box_solve(fns, problem.params, config, extra_starts=[start])
         x = [box.x_star[n] for n in E.names]
         parts = {"breakdown": breakdown(ev.hard(x), *to_host((E.data.scenario, E.data.weight)),
                                         E.scenario_names, E.spec.horizon_s())}
@@ -88,7 +97,7 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     if domain_note(domain):
         notes += (domain_note(domain),)
     return Result(
-        sensor=problem.sensor_kind, params=dict(problem.params), units={n: s.unit for n, s in problem.specs().items()},
+        sensor=problem.sensor_kind, params=dict(problem.params), units=_units(problem),
         r_star=dict(box.x_star), E_hard_star=ev.e_hard(x), E_soft_star=float(box.E_soft), solve=None, box=box,
         reference=reference_summary(ev, problem, x, _on_hard(problem, E)),
         programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
@@ -157,16 +166,16 @@ def check_lambdas(lambdas: Sequence[float]) -> tuple[float, ...]:
 def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: Objective | None = None,
            predictor: Any = None, progress: Say | None = None, on_evaluation: OnEvaluation = None) -> ParetoFront:
     """The E-versus-cost front of `problem`: a box solve per cost weight in `lambdas` (sorted
-    ascending; `problem.cost_weight` is not used), each warm-started from the previous answer.
+    ascending; `problem.question.cost_weight` is not used), each warm-started from the previous answer.
     `E`, `predictor`, `progress` and `on_evaluation` as for `diffsense.optimise`; the events also
     carry "cost", the cost of the evaluated point."""
     lambdas = check_lambdas(lambdas)
     say = progress or (lambda message: None)
     t0 = time.perf_counter()
-    say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants")
+    say(_simulating(problem))
     E = objective(problem, predictor=predictor) if E is None else E
     ev, fns, start = _functions(problem, E, on_evaluation, _planned(problem, len(lambdas)))
-    config = dataclasses.replace(problem.box, seed=problem.seed)
+    config = dataclasses.replace(problem.solver.box, seed=problem.seed)
     judged_on = "E_hard" if _on_hard(problem, E) else "E_ref"
 
     def solved(k: int, lam: float, result: BoxResult) -> None:
@@ -175,7 +184,7 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
 
     designs, on_front = pareto_sweep(fns, problem.params, lambdas, config, extra_starts=[start], on_solved=solved)
     cloud = tuple((fns.cost(e.x)[0], e.value) for e in fns.history if e.kind == "hard")
-    return ParetoFront(sensor=problem.sensor_kind, units={n: s.unit for n, s in problem.specs().items()},
-                       currency=load_costs(problem.costs).currency, lambdas=lambdas, designs=designs,
+    return ParetoFront(sensor=problem.sensor_kind, units=_units(problem),
+                       currency=load_costs(problem.question.costs).currency, lambdas=lambdas, designs=designs,
                        on_front=on_front, cloud=cloud, counts=dict(fns.counts), wall_s=time.perf_counter() - t0,
                        judged_on=judged_on)

@@ -33,17 +33,18 @@ def planned_evaluations(problem: Problem, sweep_soft: bool = True) -> int:
     `sweep_soft` False: the sweep reads E_soft off its E_ref (straight-through under a
     probabilistic law), one program per step instead of two."""
     (lo, hi), = problem.params.values()
-    steps = len(problem.steps) if problem.steps is not None else len(default_steps(lo, hi))
-    dense = 0 if problem.dense_check is None else int(math.ceil((hi - lo) / problem.dense_check - 1e-9)) + 1
+    solver = problem.solver
+    steps = len(solver.steps) if solver.steps is not None else len(default_steps(lo, hi))
+    dense = 0 if solver.dense_check is None else int(math.ceil((hi - lo) / solver.dense_check - 1e-9)) + 1
     sweep_programs = (2 if sweep_soft else 1) * steps
-    return sweep_programs + problem.solve.max_evaluations + 2 + problem.extra_curve_points * 2 + dense
+    return sweep_programs + solver.solve.max_evaluations + 2 + solver.extra_curve_points * 2 + dense
 
 
 def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progress,
                on_evaluation: Callable[[dict], None] | None, figures: bool) -> tuple[Objective, Evaluator]:
     """The problem's objective (built unless given) and its memoising, counting evaluator."""
-    say(f"{problem.sensor_kind}: simulating {len(problem.scenarios)} scenarios x {problem.variants} variants; "
-        "ground-truth predictions")
+    say(f"{problem.sensor_kind}: simulating {len(problem.traffic.scenarios)} scenarios x {problem.traffic.variants} "
+        "variants; ground-truth predictions")
     E = objective(problem, predictor=predictor) if E is None else E
     # the figures draw E_soft and its slope at the sweep's steps: value-and-gradients either way
     planned = planned_evaluations(problem, sweep_soft=figures or not _soft_value_is_e_ref(E))
@@ -68,13 +69,14 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
     """The sweep and the continuous solve (the inner hard grid for the hard estimator) of a
     one-parameter problem, the answer judged on E_hard or, under a probabilistic law, E_ref."""
     (_, (lo, hi)), = problem.params.items()
-    if problem.estimator.kind == "hard":
-        return hard_grid_solve(ev.e_hard, (lo, hi), steps=problem.steps, max_evaluations=problem.solve.max_evaluations)
-    e2_soft, e_hard = ev.solver_fns(jnp.float64 if problem.solve.dtype == "float64" else jnp.float32)
+    steps, config = problem.solver.steps, problem.solver.solve
+    if problem.question.estimator.kind == "hard":
+        return hard_grid_solve(ev.e_hard, (lo, hi), steps=steps, max_evaluations=config.max_evaluations)
+    e2_soft, e_hard = ev.solver_fns(jnp.float64 if config.dtype == "float64" else jnp.float32)
     # Under a probabilistic detection law the sweep, the answer and the polish are judged on
     # E_ref, the expectation the estimator approximates; under the threshold law E_ref is E_hard.
     e_answer = e_hard if on_hard else (lambda r: ev.e_reference(float(r)))
-    return solve(e2_soft, e_answer, (lo, hi), steps=problem.steps, config=problem.solve,
+    return solve(e2_soft, e_answer, (lo, hi), steps=steps, config=config,
                  value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref",
                  soft_value_is_answer=_soft_value_is_e_ref(ev.objective))
 
@@ -83,8 +85,8 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
                    on_evaluation: Callable[[dict], None] | None) -> tuple[Result, Objective]:
     """`optimise` of a one-parameter problem (its docstring), and the objective it built or was given."""
     (name, (lo, hi)), = problem.params.items()
-    spec = problem.specs()[name]
-    hard_only = problem.estimator.kind == "hard"
+    spec, solver = problem.sensing.specs[name], problem.solver
+    hard_only = problem.question.estimator.kind == "hard"
     with CompileClock() as clock:
         E, ev = _evaluator(problem, E, predictor, say, on_evaluation, figures)
         on_hard = hard_only or is_deterministic(E.sensor)
@@ -97,13 +99,13 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
         solve_counts = dict(ev.counts)
         say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, "
             f"{'E_hard' if on_hard else 'E_ref'}(r*) = {result.E_hard_star:.4f} m")
-        curves = report.curves(ev, E, result, lo, hi, problem.extra_curve_points, hard_only) if figures else None
-        parts = report.breakdowns(ev, E, result, problem.miss_penalty_m2)
+        curves = report.curves(ev, E, result, lo, hi, solver.extra_curve_points, hard_only) if figures else None
+        parts = report.breakdowns(ev, E, result, problem.question.miss_penalty_m2)
     figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
     dense = None
-    if problem.dense_check is not None:
-        say(f"{problem.sensor_kind}: dense reference grid every {problem.dense_check:g} {spec.unit}")
-        dense = report.dense_check(ev, result, lo, hi, problem.dense_check)
+    if solver.dense_check is not None:
+        say(f"{problem.sensor_kind}: dense reference grid every {solver.dense_check:g} {spec.unit}")
+        dense = report.dense_check(ev, result, lo, hi, solver.dense_check)
         result = dataclasses.replace(result, notes=(*result.notes, "dense check: " + dense["verdict"]))
     if domain_note(domain):
         result = dataclasses.replace(result, notes=(*result.notes, domain_note(domain)))

@@ -85,6 +85,7 @@ def reference_summary(ev: Evaluator, problem: Problem, r_star: float, on_hard: b
     """result.json's "reference": E_ref at r* with its standard error, what the answer was judged
     on, and the estimator asked for and the one it stands for ("auto" resolved)."""
     ref = ev.reference(r_star)
-    used = getattr(ev.objective, "estimator_kind", problem.estimator.kind)
-    return {"answer_on": "E_hard" if on_hard else "E_ref", "estimator": problem.estimator.kind, "estimator_used": used,
+    asked = problem.question.estimator.kind
+    used = getattr(ev.objective, "estimator_kind", asked)
+    return {"answer_on": "E_hard" if on_hard else "E_ref", "estimator": asked, "estimator_used": used,
             "E_ref_star": float(ref.e), "E_ref_star_se": float(ref.e_se), "draws": int(ref.draws.size)}

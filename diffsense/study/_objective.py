@@ -28,6 +28,7 @@ from diffsense.runtime import call
 from diffsense.scene import load_scenario
 from diffsense.sensors import Weather, relevance_stand_ins
 from diffsense.study._problem import Problem
+from diffsense.study._specs import PredictionSpec
 from diffsense.tracks import prediction_frames
 
 
@@ -39,10 +40,10 @@ def _precision(float64: bool):
     return jnp.float64 if float64 else jnp.float32
 
 
-def _predictor(problem: Problem):
-    if isinstance(problem.predictor, str):
-        return load_predictor(problem.predictor or None)
-    return problem.predictor
+def _predictor(prediction: PredictionSpec):
+    if isinstance(prediction.predictor, str):
+        return load_predictor(prediction.predictor or None)
+    return prediction.predictor
 
 
 def _in_dtype(predictor: Any, predictor_dtype: str, dtype) -> Any:
@@ -55,27 +56,29 @@ def _in_dtype(predictor: Any, predictor_dtype: str, dtype) -> Any:
 
 
 def objective(problem: Problem, *, predictor: Any = None) -> Objective:
-    """E(r) of `problem`: the scenarios simulated, the sensor and predictor loaded, every random
-    draw fixed by `problem.seed`. `predictor` (optional) replaces `problem.predictor` (an
-    already loaded one, to load it once for several problems)."""
-    dtype = _precision(problem.float64)
-    sensor = problem.make_sensor()
-    predictor = _predictor(problem) if predictor is None else predictor
-    predictor = _in_dtype(predictor, problem.predictor_dtype, dtype)
+    """E(r) of `problem`: the scenarios simulated, its sensor (built once, with the problem) and
+    its predictor loaded, every random draw fixed by `problem.seed`. `predictor` (optional)
+    replaces `problem.prediction.predictor` (an already loaded one, to load it once for several
+    problems)."""
+    traffic, prediction, question = problem.traffic, problem.prediction, problem.question
+    dtype = _precision(prediction.float64)
+    sensor = problem.sensing.built
+    predictor = _predictor(prediction) if predictor is None else predictor
+    predictor = _in_dtype(predictor, prediction.predictor_dtype, dtype)
     noise_key = seed_keys(problem.seed)[1]  # [0] is the scenes' (traffic_scenes)
-    if problem.scenes is not None:
+    if traffic.scenes is not None:
         scenes, index, names, weather = recorded_scenes(
-            problem.scenes, spec=predictor.spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
-            stride_frames=problem.prediction_stride_frames,
+            traffic.scenes, spec=predictor.spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
+            stride_frames=traffic.prediction_stride_frames,
             dtype=dtype)
     else:
         shifted, index, names, weather = traffic_scenes(problem, predictor.spec, sensor, dtype)
         scenes = shifted.base
-    frames = prediction_frames(scenes.num_frames, problem.prediction_stride_frames, predictor.spec, scenes.dt_s)
+    frames = prediction_frames(scenes.num_frames, traffic.prediction_stride_frames, predictor.spec, scenes.dt_s)
     return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
-                          fill=problem.fill, estimator=problem.estimator, key=noise_key, scenario_names=names,
-                          question=problem.objective, miss_penalty_m2=problem.miss_penalty_m2,
-                          weather=weather if problem.weather is None else Weather(**problem.weather))
+                          fill=prediction.fill, estimator=question.estimator, key=noise_key, scenario_names=names,
+                          question=question.objective, miss_penalty_m2=question.miss_penalty_m2,
+                          weather=weather if traffic.weather is None else Weather(**traffic.weather))
 
 
 def _split_seed(seed: int) -> tuple[jax.Array, jax.Array]:
@@ -93,24 +96,26 @@ def traffic_scenes(problem: Problem, spec, sensor, dtype) -> tuple[SpeedShiftedS
     """The problem's simulated scenes as a function of the traffic speed (`objective` evaluates
     them at the problem's own; `diffsense.sensitivity` differentiates them)."""
     scene_key = seed_keys(problem.seed)[0]
+    traffic = problem.traffic
     return speed_shifted_scenes(
-        problem.scenarios, problem.variants, scene_key, spec=spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
-        stride_frames=problem.prediction_stride_frames, background_vehicles=problem.background_vehicles,
-        dtype=dtype, speed_offset_kmh=problem.traffic_speed_offset_kmh)
+        traffic.scenarios, traffic.variants, scene_key, spec=spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
+        stride_frames=traffic.prediction_stride_frames, background_vehicles=traffic.background_vehicles,
+        dtype=dtype, speed_offset_kmh=traffic.traffic_speed_offset_kmh)
 
 
 def memory_estimate_bytes(problem: Problem) -> int:
     """An upper estimate of the fixed data `objective(problem)` allocates [bytes]: scenes and noise
     draws, and the Monte-Carlo estimator's uniforms (N variants x K samples x T frames x V
     vehicles), which dominate for large K. V is bounded by every vehicle a scenario defines."""
-    if problem.scenes is not None:
+    traffic, estimator = problem.traffic, problem.question.estimator
+    if traffic.scenes is not None:
         return 0  # a recording's size is known only once it is read
-    itemsize = 8 if problem.float64 else 4
+    itemsize = 8 if problem.prediction.float64 else 4
     total = 0
-    for name in problem.scenarios:
+    for name in traffic.scenarios:
         sc = load_scenario(name)
         frames = int(round(sc.duration_s / 0.1)) + 1
-        vehicles = 5 + (problem.background_vehicles or sc.background.count)
-        k = problem.estimator.samples if problem.estimator.kind == "mc" else 0
-        total += problem.variants * frames * vehicles * itemsize * (k + 20)  # ~20 per-frame fields
+        vehicles = 5 + (traffic.background_vehicles or sc.background.count)
+        k = estimator.samples if estimator.kind == "mc" else 0
+        total += traffic.variants * frames * vehicles * itemsize * (k + 20)  # ~20 per-frame fields
     return total

@@ -28,7 +28,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     One-parameter problems: the stepped sweep on E_hard, then the continuous solve inside the
     best step's bracket (`diffsense.solve.solve`; the hard estimator searches an inner grid
     instead), the answer chosen on E_hard. With `figures`, the evaluations the figures draw
-    are made too (`Result.curves`); with `problem.dense_check`, a dense grid of the reference E_ref.
+    are made too (`Result.curves`); with `problem.solver.dense_check`, a dense grid of the reference E_ref.
     `E` reuses an already built `objective(problem)`; `predictor` an already loaded predictor.
     `sensitivity` names ODD parameters ("rain_mm_h", ...) whose dr*/dtheta is computed at the
     answer (`diffsense.sensitivity`) and kept in `Result.sensitivity`.
@@ -43,7 +43,7 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         initialize(**(dict(distributed) if isinstance(distributed, Mapping) else {}))
     if sensitivity:  # refused before any work, not after the solve
         check_theta(problem, sensitivity)
-    if len(problem.params) != 1 or problem.cost_weight > 0:
+    if len(problem.params) != 1 or problem.question.cost_weight > 0:
         return optimise_box(problem, E, predictor, say, on_evaluation)
     out, E = optimise_line(problem, E, predictor, figures, say, on_evaluation)
     if sensitivity:

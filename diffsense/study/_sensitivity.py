@@ -45,8 +45,8 @@ def check_theta(problem: Problem, theta: Sequence[str]) -> None:
     if unknown:
         raise InputError(f"no sensitivity to {unknown[0]!r}: the differentiable ODD parameters are "
                          f"{', '.join(ODD_PARAMETERS)}")
-    if "traffic_speed_kmh" in theta and problem.scenes is not None:
-        raise InputError(f"no sensitivity to traffic_speed_kmh for recorded scenes ({problem.scenes}): "
+    if "traffic_speed_kmh" in theta and problem.traffic.scenes is not None:
+        raise InputError(f"no sensitivity to traffic_speed_kmh for recorded scenes ({problem.traffic.scenes}): "
                          "they move at the speeds they were recorded at")
 
 

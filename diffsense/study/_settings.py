@@ -60,12 +60,18 @@ def load_settings(path: str | Path | None = None) -> Settings:
 
 def problem_fields(settings: Settings, sensor: str | None = None, param: str | None = None,
                    interval: tuple[float, float] | None = None) -> dict[str, Any]:
-    """The `Problem` keyword arguments a config describes (sensor, param, interval overridable)."""
+    """The `Problem` keyword arguments a config describes (sensor, param, interval overridable).
+
+    The parameter's name is passed on as given, for `Problem` to resolve against its sensor;
+    only a short name without an interval is resolved here, to find its [intervals] entry."""
     p = settings.problem
     sensor = sensor or p.sensor
-    name = resolve_name(make_sensor(sensor), param or p.param)
+    name = param or p.param
     if interval is None:
-        interval = settings.intervals.get(sensor, {}).get(name)
+        table = settings.intervals.get(sensor, {})
+        if name not in table:  # a short or qualified name: the table holds full names
+            name = resolve_name(make_sensor(sensor), name)
+        interval = table.get(name)
         if interval is None:
             raise InputError(f"no interval for {sensor} {name}: give one (--interval LO HI, or [intervals.{sensor}])")
     return dict(sensor=sensor, params={name: tuple(interval)}, **shared_fields(settings))
