@@ -1,16 +1,25 @@
-"""Every command-line front-end of diffsense: the only code that knows argv.
+"""Every command-line face of diffsense: the only code that knows argv.
 
-Each module holds one command's argparse front-end and a `main(argv) -> int`; the work is the
-library's. `run(main)` is the shared contract: bad input is one `error:` line and exit 2, never
-a traceback; Ctrl-C exits 130.
+One console command, `diffsense COMMAND ...` (`diffsense/cli/_main.py`, also `python -m
+diffsense.cli COMMAND ...`); each command's module holds its argparse front-end (built on the one
+`Parser`) and a `main(argv, prog) -> int`; the work is the library's. The `python -m` forms run
+the same mains:
 
-    python -m diffsense.optimise     diffsense.cli.optimise   (also the `diffsense-optimise` script)
-    python -m diffsense.scene        diffsense.cli.scene
-    python -m diffsense.sensors      diffsense.cli.sensors
-    python -m diffsense.predictors   diffsense.cli.predict
-    python -m diffsense.train        diffsense.cli.train
+    diffsense optimise      python -m diffsense.optimise      diffsense.cli.optimise  (also `diffsense-optimise`)
+    diffsense inspect       python -m diffsense.sensors inspect   diffsense.cli.sensors
+    diffsense scene         python -m diffsense.scene         diffsense.cli.scene
+    diffsense generate      python -m diffsense.scene generate    diffsense.cli.generate
+    diffsense train         python -m diffsense.train         diffsense.cli.train
+    diffsense predict       python -m diffsense.predictors    diffsense.cli.predict
+    diffsense case-study                                      diffsense.cli.case_study
+
+Every face runs its main under `run(main)`, the one error contract: bad input (an `InputError`,
+a bad flag, an `OSError`) is one `error:` line and exit 2, never a traceback; SIGINT exits 130,
+SIGTERM 143.
 """
 
+from diffsense.cli._parser import Parser
+from diffsense.cli._progress import Progress
 from diffsense.cli._run import run, setup_jax
 
-__all__ = ["run", "setup_jax"]
+__all__ = ["Parser", "Progress", "run", "setup_jax"]

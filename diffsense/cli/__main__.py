@@ -1,5 +1,6 @@
 """`python -m diffsense.cli COMMAND ...`: the `diffsense` console command without its script."""
 
-from diffsense.cli._main import console
+from diffsense.cli import run
+from diffsense.cli._main import main
 
-console()
+run(lambda: main(prog="python -m diffsense.cli"), end_process=True)

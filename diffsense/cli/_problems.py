@@ -44,7 +44,13 @@ def _number_list(text: str, what: str) -> tuple[float, ...]:
 def problems(args: argparse.Namespace) -> list:
     """The `diffsense.Problem` of each sensor the flags ask for, every input checked."""
     from diffsense.solve import check_steps
-    from diffsense.study import Problem, checked, load_settings, problem_fields, shared_fields
+    from diffsense.study import (
+        Problem,
+        checked,
+        load_settings,
+        problem_fields,
+        shared_fields,
+    )
 
     settings = load_settings(args.config)
     suite = suite_fields(args)
@@ -69,9 +75,9 @@ def problems(args: argparse.Namespace) -> list:
             fields = problem_fields(settings, sensor, single, tuple(args.interval) if args.interval else None)
         fields.update(_flag_fields(args, settings, suite))
         problem = checked(args.suite, lambda: Problem(**fields)) if suite else Problem(**fields)
-        if problem.steps is not None:
+        if problem.solver.steps is not None:
             (lo, hi), = problem.params.values()
-            check_steps(problem.steps, lo, hi)
+            check_steps(problem.solver.steps, lo, hi)
         out.append(problem)
     return out
 

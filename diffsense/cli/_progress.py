@@ -13,6 +13,8 @@ import sys
 import time
 from typing import Any, TextIO
 
+from tqdm import tqdm
+
 LONG_RUN_S = 60.0
 
 
@@ -20,8 +22,8 @@ class Progress:
     """`progress(message)` prints a stage line; `progress.evaluation(event)` counts one
     evaluation (`diffsense.optimise`'s `on_evaluation` hook)."""
 
-    def __init__(self, quiet: bool, stream: TextIO = sys.stderr):
-        self.quiet, self.stream = quiet, stream
+    def __init__(self, quiet: bool, stream: TextIO | None = None):
+        self.quiet, self.stream = quiet, sys.stderr if stream is None else stream  # stderr as it is now
         self.t0 = time.perf_counter()
         self._bar: Any = None
         self._times: list[float] = []
@@ -56,8 +58,6 @@ class Progress:
         text += f", ETA {eta:.0f} s" if eta is not None else ""
         if self.stream.isatty():
             if self._bar is None:
-                from tqdm import tqdm
-
                 self._bar = tqdm(total=planned, initial=done - 1, unit="eval", file=self.stream, dynamic_ncols=True)
             self._bar.total = planned
             self._bar.set_postfix_str(text, refresh=False)

@@ -6,7 +6,8 @@ Only CLI modules import this. `run(main)` calls `main()` and keeps these promise
   <reason>`;
 - SIGINT (Ctrl-C), at any moment, prints the one line `interrupted` and exits 130; SIGTERM prints
   `terminated` and exits 143 (128 + the signal number, as a shell reports a signal); neither leaves
-  a temporary file, staging folder or half-published output set behind (`diffsense.runtime._io`).
+  a temporary file, staging folder or half-published output set behind (`diffsense.runtime`'s
+  output sets).
 
 Why not KeyboardInterrupt: a Ctrl-C that lands while JAX runs a host callback
 (`jax.pure_callback`) raises inside the callback, and XLA re-raises it as a `ValueError` with a
@@ -27,6 +28,8 @@ import sys
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
+
+import jax
 
 from diffsense import runtime
 from diffsense.runtime import InputError
@@ -62,8 +65,7 @@ def run(main: Callable[[], int | None], *, end_process: bool = False) -> None:
 
 
 def _distributed() -> bool:
-    jax = sys.modules.get("jax")
-    return jax is not None and jax.process_count() > 1
+    return jax.process_count() > 1
 
 
 def _fail(message: str) -> None:
@@ -136,15 +138,11 @@ def setup_jax(float64: bool = True, compilation_cache: bool = True) -> None:
     The cache lives in JAX_COMPILATION_CACHE_DIR when it is set, else in the user's cache
     directory (XDG_CACHE_HOME or ~/.cache)/diffsense/jax. Every program is cached, however
     quickly it compiled, so a second run of the same command compiles nothing. The objective's
-    compiled programs are kept beside it, in `executables/` (`diffsense.runtime._executables`), so a
+    compiled programs are kept beside it, in `executables/` (`diffsense.runtime.keep_in`), so a
     second run does not trace them either.
     """
-    import jax
-
-    from diffsense.runtime import keep_in
-
     jax.config.update("jax_enable_x64", float64)
-    keep_in(None)
+    runtime.keep_in(None)
     if compilation_cache and os.environ.get("DIFFSENSE_NO_CACHE") != "1":
         base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
         cache_dir = Path(os.environ.get("JAX_COMPILATION_CACHE_DIR") or base / "diffsense" / "jax")
@@ -153,6 +151,6 @@ def setup_jax(float64: bool = True, compilation_cache: bool = True) -> None:
             jax.config.update("jax_compilation_cache_dir", str(cache_dir))
             jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
             jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-            keep_in(cache_dir / "executables")
+            runtime.keep_in(cache_dir / "executables")
         except OSError:
             pass  # a read-only home only costs speed

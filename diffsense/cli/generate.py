@@ -1,6 +1,7 @@
-"""`python -m diffsense.scene generate`: write a CS-LSTM training set from simulated traffic.
+"""`diffsense generate` (and `python -m diffsense.scene generate`): write a CS-LSTM training set
+from simulated traffic.
 
-    python -m diffsense.scene generate --out DIR [--config FILE] [--samples N] [--seed S]
+    diffsense generate --out DIR [--config FILE] [--samples N] [--seed S]
 
 Without --config the shipped configs/traffic/default.toml is used; --samples and --seed override
 the config's sampling.num_samples and sampling.seed.
@@ -13,16 +14,18 @@ import sys
 import time
 from pathlib import Path
 
-from diffsense.runtime import InputError
+import jax
+from tqdm import tqdm
+
+from diffsense import config
+from diffsense.cli import Parser, setup_jax
+from diffsense.scene import TrafficConfig
+
+PROG = "python -m diffsense.scene generate"
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line and exit 2 (via diffsense._cli.run), no usage dump
-        raise InputError(message)
-
-
-def _parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="python -m diffsense.scene generate", description=__doc__.splitlines()[0])
+def _parser(prog: str) -> argparse.ArgumentParser:
+    p = Parser(prog=prog, description="Write a CS-LSTM training set from simulated traffic.")
     p.add_argument("--out", required=True, help="dataset folder to create (must not exist or be empty)")
     p.add_argument("--config", help="traffic config TOML (default: the shipped traffic/default.toml)")
     p.add_argument("--samples", type=int, help="number of samples (default: the config's sampling.num_samples)")
@@ -31,13 +34,8 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point; `argv` excludes the word `generate`."""
-    args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
-    from diffsense import config
-    from diffsense.cli import setup_jax
-    from diffsense.scene import TrafficConfig
-
+def main(argv: list[str] | None = None, prog: str = PROG) -> int:
+    args = _parser(prog).parse_args(argv)
     cfg = config.load(TrafficConfig, args.config) if args.config else config.load_default(TrafficConfig, "traffic/default.toml")
     changes = {}
     if args.samples is not None:
@@ -46,20 +44,16 @@ def main(argv: list[str] | None = None) -> int:
         changes["seed"] = args.seed
     if changes:
         cfg = config.replace(cfg, sampling=config.replace(cfg.sampling, **changes))
+    from diffsense import train  # start-up: the training stack, only once the flags are good
 
-    import jax
-    from tqdm import tqdm
-
-    from diffsense.train import check_output_dir, write_dataset
-
-    check_output_dir(Path(args.out))
+    train.check_output_dir(Path(args.out))
     # The simulation is float32 whatever the x64 flag (the samples are float32): keep the flag.
     setup_jax(float64=bool(jax.config.read("jax_enable_x64")))
 
     start = time.perf_counter()
     n = cfg.sampling.num_samples
     with tqdm(total=n, unit="sample", unit_scale=True, disable=args.no_progress, file=sys.stderr) as bar:
-        meta = write_dataset(cfg, args.out, n, cfg.sampling.seed, progress=bar.update)
+        meta = train.write_dataset(cfg, args.out, n, cfg.sampling.seed, progress=bar.update)
     elapsed = time.perf_counter() - start
     lat, lon = meta["lat_label_counts"], meta["lon_label_counts"]
     print(
@@ -70,8 +64,3 @@ def main(argv: list[str] | None = None) -> int:
     )
     return 0
 
-
-if __name__ == "__main__":
-    from diffsense.cli import run
-
-    run(main, end_process=True)

@@ -1,6 +1,6 @@
-"""`python -m diffsense.optimise`: the best sensor parameter r over an interval.
+"""`diffsense optimise` (and `python -m diffsense.optimise`): the best sensor parameter r over an interval.
 
-    python -m diffsense.optimise --param hfov --interval 30 180
+    diffsense optimise --param hfov --interval 30 180
 
 A thin face over `diffsense.optimise`: the flags and `--config` become a `diffsense.Problem`
 (defaults: configs/optimise/default.toml; a config file may be partial), the library solves it,
@@ -12,26 +12,32 @@ pareto.png). --suite FILE reads the sensors, parameters and cost weight from a s
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
 import math
+import os
+import shutil
+import tempfile
 import threading
 from pathlib import Path
 
-from diffsense import cli as _cli
+import diffsense as ds
+from diffsense import runtime
+from diffsense.cli import Parser, Progress, run, setup_jax
 from diffsense.cli._problems import problems
-from diffsense.cli._progress import Progress
 from diffsense.cli._suite import pareto_lambdas, pareto_run
+from diffsense.metrics import ESTIMATORS
+from diffsense.predictors import load_predictor
 from diffsense.runtime import InputError
+from diffsense.scene import check_speed_offset, load_scenario
+from diffsense.study import ODD_PARAMETERS, check_theta, memory_estimate_bytes
+
+PROG = "python -m diffsense.optimise"
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # argparse's usage dump + exit 2 -> our one line + exit 2
-        raise InputError(message)
-
-
-def _parser() -> argparse.ArgumentParser:
-    p = _Parser(
-        prog="python -m diffsense.optimise",
+def _parser(prog: str = PROG) -> argparse.ArgumentParser:
+    p = Parser(
+        prog=prog,
         description="Find the sensor parameter r in [LO, HI] that minimises the trajectory "
         "prediction error E_RMSE(r) (the paper's Eq. 12), cross-checked by the stepped sweep.",
     )
@@ -64,8 +70,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--predictor-dtype", choices=("auto", "float32", "float64"),
                    help="the predictor's arithmetic inside the float64 E(r) (default auto: the CS-LSTM in float32, "
                         "its weights' own precision, at half the cost; docs: speed and accuracy)")
-    # diffsense.metrics.ESTIMATORS, spelled out: the parser is built before jax is imported.
-    p.add_argument("--estimator", choices=("auto", "mean-field", "mc", "relaxed-reference", "straight-through", "hard"),
+    p.add_argument("--estimator", choices=ESTIMATORS,
                    help="how detection uncertainty enters (auto, under a probabilistic detection law: straight-through "
                         "for one parameter, relaxed-reference for several; mean-field under the threshold law; "
                         "docs: detection)")
@@ -105,18 +110,15 @@ def _parser() -> argparse.ArgumentParser:
 
 def _check_inputs(problems_: list) -> None:
     """Every input that can be checked before any computation: scenarios, predictor file."""
-    from diffsense.scene import check_speed_offset, load_scenario
-
     for problem in problems_:
-        for name in () if problem.scenes is not None else problem.scenarios:
-            check_speed_offset(load_scenario(name), problem.traffic_speed_offset_kmh)
-        if isinstance(problem.predictor, str) and problem.predictor and not Path(problem.predictor).is_file():
-            raise InputError(f"--model {problem.predictor}: not a file")
+        traffic, model = problem.traffic, problem.prediction.predictor
+        for name in () if traffic.scenes is not None else traffic.scenarios:
+            check_speed_offset(load_scenario(name), traffic.traffic_speed_offset_kmh)
+        if isinstance(model, str) and model and not Path(model).is_file():
+            raise InputError(f"--model {model}: not a file")
 
 
 def _sensitivity_names(text: str | None, problems_: list) -> tuple[str, ...]:
-    from diffsense.study import ODD_PARAMETERS, check_theta
-
     names = tuple(t.strip() for t in (text or "").split(",") if t.strip())
     unknown = [t for t in names if t not in ODD_PARAMETERS]
     if unknown:
@@ -128,10 +130,6 @@ def _sensitivity_names(text: str | None, problems_: list) -> tuple[str, ...]:
 
 def _check_memory(todo: list, max_memory_gb: float | None) -> None:
     """Refuse, before any computation, a run whose estimated memory exceeds the limit."""
-    import os
-
-    from diffsense.study import memory_estimate_bytes
-
     if max_memory_gb is None:
         limit = 0.5 * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     elif math.isfinite(max_memory_gb) and max_memory_gb > 0:
@@ -147,22 +145,16 @@ def _check_memory(todo: list, max_memory_gb: float | None) -> None:
 def _join(args, out: Path) -> tuple[Path, bool]:
     """Join the distributed run; a process other than 0 computes the same steps but writes its
     outputs to a scratch folder and prints nothing. Returns (output folder, quiet)."""
-    import atexit
-    import shutil
-    import tempfile
-
-    from diffsense.runtime import initialize, is_writer
-
-    initialize(args.coordinator, args.num_processes, args.process_id)
-    if is_writer():
+    runtime.initialize(args.coordinator, args.num_processes, args.process_id)
+    if runtime.is_writer():
         return out, args.quiet
     scratch = Path(tempfile.mkdtemp(prefix="diffsense-worker-"))
     atexit.register(shutil.rmtree, scratch, True)
     return scratch, True
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = PROG) -> int:
+    args = _parser(prog).parse_args(argv)
     if not args.distributed and (args.coordinator, args.num_processes, args.process_id) != (None, None, None):
         raise InputError("--coordinator, --num-processes and --process-id need --distributed")
     todo = problems(args)
@@ -171,57 +163,47 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} exists and is not a folder")
-    from diffsense.runtime import check_writable, output_set
-
-    _sensitivity_names(args.sensitivity, todo)
-    check_writable(out)  # before any computation
+    theta = _sensitivity_names(args.sensitivity, todo)
+    runtime.check_writable(out)  # before any computation
     _check_memory(todo, args.max_memory_gb)
 
-    _cli.setup_jax(float64=todo[0].float64)
+    setup_jax(float64=todo[0].prediction.float64)
     if args.distributed:
         out, args.quiet = _join(args, out)
-    import diffsense as ds
-    from diffsense.predictors import load_predictor
-    from diffsense.runtime import write_bytes
-
-    # matplotlib's import (about 0.4 s) overlaps the computations, which release the GIL.
+    # Start-up: diffsense.report (matplotlib's figures) is imported in the background, while
+    # the computations, which release the GIL, run.
     threading.Thread(target=importlib.import_module, args=("diffsense.report",), daemon=True).start()
 
     progress = Progress(args.quiet)
-    theta = _sensitivity_names(args.sensitivity, todo)
-
-    model = todo[0].predictor
+    model = todo[0].prediction.predictor
     predictor = load_predictor(model or None)  # a bad checkpoint fails before any output
     progress("loaded the predictor" + (f" {model}" if model else " (shipped weights)"))
     if lambdas is not None:
         return pareto_run(todo[0], lambdas, out, predictor, progress)
     results = {}
+    comparison = None
     # Every file of the run is written to a staging folder and published into --out as one set:
     # an interrupted or failed run leaves the previous run's files as they were.
-    with output_set(out) as staging:
+    with runtime.output_set(out) as staging:
         for problem in todo:
             folder = staging / problem.sensor_kind if len(todo) > 1 else staging
             result = ds.optimise(problem, predictor=predictor, progress=progress, on_evaluation=progress.evaluation,
                                  sensitivity=theta)
-            from diffsense import (
-                report,  # imported in the background above (or waits for it)
-            )
+            from diffsense import report  # imported in the background above (or waits for it)
 
             results[problem.sensor_kind] = report.write_run(result, folder)
         if len(results) > 1:
             first = next(iter(results.values()))
-            table = report.comparison_table(results, unit=first["units"][first["param"]])
-            write_bytes(staging / "comparison.txt", (table + "\n").encode())
-    progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if len(results) > 1 else ""))
+            comparison = report.comparison_table(results, unit=first["units"][first["param"]])
+            runtime.write_bytes(staging / "comparison.txt", (comparison + "\n").encode())
+    progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if comparison else ""))
     if out == Path(args.out):  # else a distributed run's worker: process 0 prints and writes
-        _print_tables(results, table if len(results) > 1 else None)
+        _print_tables(report, results, comparison)
     return 0
 
 
-def _print_tables(results: dict, comparison: str | None) -> None:
+def _print_tables(report, results: dict, comparison: str | None) -> None:
     """Each sensor's summary (or box) table and breakdown, then the radar-camera comparison."""
-    from diffsense import report
-
     for content in results.values():
         if content["param"] is None:
             print("\n" + report.box_table(content))
@@ -234,4 +216,4 @@ def _print_tables(results: dict, comparison: str | None) -> None:
 
 def console() -> None:
     """The `diffsense-optimise` console script: `main` under the error contract of `run`."""
-    _cli.run(main, end_process=True)
+    run(lambda: main(prog="diffsense-optimise"), end_process=True)

@@ -1,4 +1,5 @@
-"""`python -m diffsense.predictors`: parity with the PyTorch reference, and the default model card.
+"""`diffsense predict` (and `python -m diffsense.predictors`): parity with the PyTorch reference,
+and the default model card.
 
   parity --checkpoint PATH --inputs IN.npz --out OUT.npz
       IN.npz: hist [16, B, 2], nbrs [16, N, 2], mask [B, 3, 13, 64] bool (the reference's layout,
@@ -18,9 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from diffsense import cli as _cli
 from diffsense import runtime
+from diffsense.cli import Parser
+from diffsense.predictors import DEFAULT_WEIGHTS, load_predictor, read_card, reference_forward
 from diffsense.runtime import InputError
+
+PROG = "python -m diffsense.predictors"
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
@@ -38,8 +42,6 @@ def _read_npz(path: Path) -> dict[str, np.ndarray]:
 
 
 def _parity(args: argparse.Namespace) -> int:
-    from diffsense.predictors import load_predictor, reference_forward
-
     arrays = _read_npz(Path(args.inputs))
     predictor = load_predictor(args.checkpoint)
     out = reference_forward(predictor, arrays["hist"], arrays["nbrs"], arrays["mask"], args.inputs)
@@ -52,20 +54,13 @@ def _parity(args: argparse.Namespace) -> int:
 
 
 def _card(args: argparse.Namespace) -> int:
-    from diffsense.predictors import DEFAULT_WEIGHTS, read_card
-
     print(json.dumps(read_card(args.weights or DEFAULT_WEIGHTS), indent=2))
     return 0
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line and exit 2, like every other bad input
-        raise InputError(f"{self.prog}: {message}")
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = _Parser(prog="python -m diffsense.predictors", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+def main(argv: list[str] | None = None, prog: str = PROG) -> int:
+    parser = Parser(prog=prog, description="The predictor: parity with the PyTorch reference, and the model card.")
+    sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("parity", help="reference-layout forward pass of a checkpoint")
     p.add_argument("--checkpoint", required=True, help="published PyTorch checkpoint or .msgpack")
     p.add_argument("--inputs", required=True, help="npz with hist, nbrs, mask (reference layout)")
@@ -74,7 +69,3 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--weights", default=None, help="a .msgpack weight file instead of the default")
     args = parser.parse_args(argv)
     return _parity(args) if args.command == "parity" else _card(args)
-
-
-if __name__ == "__main__":
-    _cli.run(main, end_process=True)

@@ -1,7 +1,8 @@
 """Sensor inspector: what a setting means for a vehicle on boresight, and its coverage field.
 
-    python -m diffsense.sensors inspect --sensor radar --hfov 30 [--at-range 100] [--json]
-    python -m diffsense.sensors inspect --sensor camera --hfov 30,90,180 --plot coverage.png
+    diffsense inspect --sensor radar --hfov 30 [--at-range 100] [--json]
+    diffsense inspect --sensor camera --hfov 30,90,180 --plot coverage.png
+    python -m diffsense.sensors inspect ...                     # the same
 
 Bad input prints one line and exits with code 2.
 """
@@ -11,10 +12,12 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 
-from diffsense.cli import run, setup_jax
+from diffsense.cli import Parser, setup_jax
 from diffsense.runtime import InputError
+from diffsense.sensors import boresight_report, load_config, make_params
+
+PROG = "python -m diffsense.sensors"
 
 _KINDS = ("car", "van", "truck")
 _PLOT_FORMATS = ("png", "pdf", "svg")
@@ -26,15 +29,14 @@ _COLUMNS = {
 }
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line and exit 2 through run(), never usage + traceback
-        raise InputError(message)
+def _parser(prog: str) -> argparse.ArgumentParser:
+    parser = Parser(prog=prog, description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    _inspect_flags(sub.add_parser("inspect", help="link budget / coverage of sensor settings"))
+    return parser
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="python -m diffsense.sensors", description=__doc__.split("\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    p = sub.add_parser("inspect", help="link budget / coverage of sensor settings")
+def _inspect_flags(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--sensor", required=True, choices=("radar", "camera"))
     p.add_argument("--config", help="TOML of sensor constants (any subset) replacing the profile's")
     p.add_argument("--profile", choices=("physical", "paper"), default="physical",
@@ -48,7 +50,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=float, default=1.8, help="probe vehicle width [m]")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--plot", help="write the detection-probability field (png/pdf/svg)")
-    return parser
+    return p
 
 
 def _floats(text: str, what: str) -> list[float]:
@@ -62,8 +64,6 @@ def _floats(text: str, what: str) -> list[float]:
 
 
 def _settings(args, config):
-    from diffsense.sensors import make_params
-
     overrides: dict[str, float] = {}
     for item in args.set:
         name, sep, value = item.partition("=")
@@ -94,49 +94,31 @@ def _table(sensor: str, rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def _plot(path: str, sensor: str, settings, config, probe: dict) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from diffsense.runtime import save_figure
-    from diffsense.sensors import coverage_field
-
-    reach = 1.2 * max(float(p.range_m) for p in settings)
-    xs = np.linspace(-0.5 * reach, reach, 241)
-    ys = np.linspace(-0.75 * reach, 0.75 * reach, 181)
-    fig, axes = plt.subplots(1, len(settings), figsize=(4.2 * len(settings), 4.0), squeeze=False)
-    for ax, params in zip(axes[0], settings):
-        field = coverage_field(params, config, xs, ys, **probe)
-        im = ax.imshow(field, origin="lower", extent=(xs[0], xs[-1], ys[0], ys[-1]),
-                       vmin=0.0, vmax=1.0, cmap="viridis", aspect="equal")
-        ax.add_patch(plt.Rectangle((-2.25, -0.9), 4.5, 1.8, color="red"))
-        ax.set_title(f"{sensor} HFOV {float(params.hfov_deg):g} deg")
-        ax.set_xlabel("forward x [m]")
-    axes[0][0].set_ylabel("left y [m]")
-    fig.colorbar(im, ax=axes[0].tolist(), label="p_detect (soft)", shrink=0.8)
-    save_figure(fig, path, dpi=120)
-    plt.close(fig)
+def main(argv: list[str] | None = None, prog: str = PROG) -> int:
+    """`python -m diffsense.sensors inspect ...`."""
+    return _inspect(_parser(prog).parse_args(argv))
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+def inspect(argv: list[str] | None = None, prog: str = "diffsense inspect") -> int:
+    """`diffsense inspect ...`: the same command without the word `inspect`."""
+    parser = Parser(prog=prog, description=__doc__.split("\n")[0])
+    return _inspect(_inspect_flags(parser).parse_args(argv))
+
+
+def _inspect(args: argparse.Namespace) -> int:
     _check_probe(args)
     setup_jax(float64=True)
-    from diffsense.sensors import load_config
-    from diffsense.sensors import boresight_report
-
     config = load_config(args.sensor, args.config, args.profile)
     settings = _settings(args, config)
-    probe = dict(kind=_KINDS.index(args.kind), length_m=args.length, width_m=args.width)
+    probe = {"kind": _KINDS.index(args.kind), "length_m": args.length, "width_m": args.width}
     rows = []
     for params in settings:
         at_range = float(params.range_m) if args.at_range is None else args.at_range
         rows.append(boresight_report(params, config, at_range, **probe))
     if args.plot:
-        _plot(args.plot, args.sensor, settings, config, probe)
+        from diffsense import report  # start-up: matplotlib's figures, only for a plot
+
+        report.plot_coverage(args.plot, args.sensor, settings, config, probe)
     if args.json:
         print(json.dumps({"sensor": args.sensor, "kind": args.kind, "results": rows}, indent=2))
     else:
@@ -145,7 +127,3 @@ def main(argv: list[str] | None = None) -> int:
         if args.plot:
             print(f"wrote {args.plot}")
     return 0
-
-
-if __name__ == "__main__":
-    run(lambda: main(sys.argv[1:]))

@@ -1,4 +1,4 @@
-"""`python -m diffsense.sensors`: the same as `diffsense sensors` (the command line is diffsense.cli.sensors's)."""
+"""`python -m diffsense.sensors inspect ...`: the same as `diffsense inspect ...` (the command line is diffsense.cli.sensors's)."""
 
 from diffsense.cli import run
 from diffsense.cli.sensors import main
