@@ -4,7 +4,7 @@
 
 Each row compiles (`jax.jit(f).lower(key).compile()`, a new function each time, so nothing is
 cached) a draw of one shape two ways, interleaved: `jax.random.normal(key, shape)` as JAX
-makes it, and `diffsense.runtime._random.normal`, the same numbers drawn flat and reshaped. Medians
+makes it, and `diffsense.runtime.normal`, the same numbers drawn flat and reshaped. Medians
 (and minimum) of --repeats compilations, float64, in the default threefry mode. The shapes are
 the main job's: measurement noise of 48 variants x 201 frames x 5 vehicles (all at once, and one
 variant's under vmap over 48 keys) and 64 Monte-Carlo uniform draws of one variant.
@@ -19,7 +19,7 @@ import time
 import jax
 import jax.numpy as jnp
 
-from diffsense.runtime import _random
+from diffsense import runtime
 
 jax.config.update("jax_enable_x64", True)
 
@@ -36,7 +36,7 @@ def _jax(kind, key, shape):
 
 
 def _flat(kind, key, shape):
-    return getattr(_random, kind)(key, shape, jnp.float64)
+    return getattr(runtime, kind)(key, shape, jnp.float64)
 
 
 def _compile_s(fn) -> float:

@@ -1,4 +1,4 @@
-"""A tiny dataset in the traffic generator's documented layout (diffsense.train._samples), made
+"""A tiny dataset in the traffic generator's documented layout (the samples of diffsense.train), made
 from simple kinematics, so that training can be tested without the generator."""
 
 from __future__ import annotations

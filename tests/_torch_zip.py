@@ -16,41 +16,42 @@ import zipfile
 import numpy as np
 
 
-def _unicode(s: str) -> bytes:
+# Pickle opcodes as torch.save writes them (protocol 2), for hand-made pickles.
+def pickled_str(s: str) -> bytes:
     b = s.encode()
     return b"X" + struct.pack("<I", len(b)) + b
 
 
-def _int(i: int) -> bytes:
+def pickled_int(i: int) -> bytes:
     if -(1 << 31) <= i < (1 << 31):
         return b"J" + struct.pack("<i", i)
     raw = i.to_bytes((i.bit_length() + 8) // 8, "little", signed=True)  # LONG1, as pickle does
     return b"\x8a" + bytes([len(raw)]) + raw
 
 
-def _tuple(items: list[bytes]) -> bytes:
+def pickled_tuple(items: list[bytes]) -> bytes:
     return b"(" + b"".join(items) + b"t"
 
 
-def _global(module: str, name: str) -> bytes:
+def pickled_global(module: str, name: str) -> bytes:
     return b"c" + module.encode() + b"\n" + name.encode() + b"\n"
 
 
 def pickle_bytes(sd: dict[str, np.ndarray], extra_global: tuple[str, str, str] | None = None,
                  geometry: dict[str, tuple[int, tuple, tuple, int]] | None = None) -> bytes:
-    out = [b"\x80\x02", _global("collections", "OrderedDict"), b")R", b"("]
+    out = [b"\x80\x02", pickled_global("collections", "OrderedDict"), b")R", b"("]
     for key_id, (name, arr) in enumerate(sd.items()):
         stride = [int(np.prod(arr.shape[i + 1:])) for i in range(arr.ndim)]
         offset, shape, stride, numel = (geometry or {}).get(name, (0, arr.shape, stride, arr.size))
-        pid = _tuple([_unicode("storage"), _global("torch", "FloatStorage"), _unicode(str(key_id)),
-                      _unicode("cpu"), _int(numel)])
-        args = _tuple([pid + b"Q", _int(offset), _tuple([_int(n) for n in shape]),
-                       _tuple([_int(s) for s in stride]), b"\x89",
-                       _global("collections", "OrderedDict") + b")R"])
-        out += [_unicode(name), _global("torch._utils", "_rebuild_tensor_v2"), args, b"R"]
+        pid = pickled_tuple([pickled_str("storage"), pickled_global("torch", "FloatStorage"), pickled_str(str(key_id)),
+                      pickled_str("cpu"), pickled_int(numel)])
+        args = pickled_tuple([pid + b"Q", pickled_int(offset), pickled_tuple([pickled_int(n) for n in shape]),
+                       pickled_tuple([pickled_int(s) for s in stride]), b"\x89",
+                       pickled_global("collections", "OrderedDict") + b")R"])
+        out += [pickled_str(name), pickled_global("torch._utils", "_rebuild_tensor_v2"), args, b"R"]
     if extra_global is not None:  # e.g. ("posix", "system", "touch /tmp/x"): key -> call result
         module, name, arg = extra_global
-        out += [_unicode("payload"), _global(module, name), _tuple([_unicode(arg)]), b"R"]
+        out += [pickled_str("payload"), pickled_global(module, name), pickled_tuple([pickled_str(arg)]), b"R"]
     out += [b"u", b"."]
     return b"".join(out)
 

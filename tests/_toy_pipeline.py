@@ -9,6 +9,7 @@ predictor extrapolates the target's constant velocity and is nudged by its occup
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import ClassVar
 
 import equinox as eqx
@@ -16,11 +17,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from diffsense import config as cfg
+from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.predictors import CSLSTM_SPEC, InputSpec, PredictorInputs
 from diffsense.scene import Scene
-from diffsense.sensors import Sensor
-from diffsense.sensors._datatypes import Detections
-from diffsense.sensors._params import ParamSpec
+from diffsense.sensors import Detections, ParamSpec, Radar, Sensor
+from diffsense.tracks import build_inputs, flatten_instants, prediction_frames
 from tests._synthetic import straight_scene
 
 NOISE_M = 0.3
@@ -92,10 +94,46 @@ class ValidatedToyPredictor(ToyPredictor):
 def toy_objective(n: int = 3, key=None, instants: int | None = None, **kwargs):
     """E(range_m) of the toy sensor and predictor over `n` toy scenes (the first `instants`
     prediction instants of each, all if None)."""
-    from diffsense.metrics import make_objective
-    from diffsense.tracks import prediction_frames
-
     scenes, scenario = toy_scenes(n)
     frames = prediction_frames(scenes.num_frames)[:instants]
     return make_objective(scenes, scenario, frames, ToySensor(), ToyPredictor(jnp.asarray(TOY_GAIN)),
                           names=("range_m",), key=key, **kwargs)
+
+
+LAWS = Path(__file__).resolve().parents[1] / "configs" / "sensors" / "laws"
+# The shipped radar with the Swerling-1 detection law: its detections are random events.
+SWERLING = Radar.from_toml(LAWS / "radar_swerling1.toml")
+H = "hfov_deg"
+
+
+def with_pfa(radar: Radar, pfa: float) -> Radar:
+    """`radar` with another false-alarm probability of its detection law."""
+    return Radar(cfg.replace(radar.config, detection=cfg.replace(radar.config.detection, pfa=pfa)))
+
+
+def radar_objective(radar=SWERLING, key=None, draws=4, n=1, kind="mean-field", **knobs):
+    """E(hfov_deg) of `radar` and the toy predictor over `n` toy scenes, 3 instants each."""
+    scenes, scenario = toy_scenes(n)
+    frames = prediction_frames(scenes.num_frames)[:3]
+    return make_objective(scenes, scenario, frames, radar, ToyPredictor(jnp.asarray(TOY_GAIN)), names=(H,),
+                          key=key, estimator=EstimatorConfig(kind=kind, reference_draws=draws, **knobs), shard=False)
+
+
+def predictions(E, det: Detections) -> jax.Array:
+    """E's predictor on tracks built from detections `det` [N, T, V]: [N, I, F, 2] [m], through
+    the public tracks functions (independent of the objective's own path)."""
+    frames = jnp.asarray(E.frames)
+    inputs = jax.vmap(lambda s, d: build_inputs(s, d, frames, E.fill, E.spec))(E.data.scenes, det)
+    return E.predictor(flatten_instants(inputs)).reshape(E.data.gt_pred.shape)
+
+
+def eq12_of(E, det: Detections) -> jax.Array:
+    """Eq. 12's E^2 [m^2] of detections `det`: the variant-weighted mean of the mean over instants
+    and horizon steps of the squared distance to the ground-truth-input prediction."""
+    sq = jnp.sum((predictions(E, det) - E.data.gt_pred) ** 2, axis=-1)
+    return jnp.sum(E.data.weight * jnp.mean(sq, axis=(1, 2))) / jnp.sum(E.data.weight)
+
+
+def float32(scenes: Scene) -> Scene:
+    """`scenes` with every float array in float32."""
+    return jax.tree.map(lambda a: a.astype(jnp.float32) if jnp.issubdtype(a.dtype, jnp.floating) else a, scenes)

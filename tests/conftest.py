@@ -17,7 +17,7 @@ os.environ.setdefault("JAX_DISABLE_MOST_OPTIMIZATIONS", "1")
 import jax
 import pytest
 
-from diffsense.runtime._executables import keep_in
+from diffsense.runtime import keep_in
 
 jax.config.update("jax_enable_x64", True)
 # No test reads or writes the user's persistent compilation cache: a command run in-process

@@ -1,5 +1,8 @@
-"""More than one host, for real: two CPU processes on localhost (gloo collectives) give the same E
-and gradient as one process; the command line's --distributed run writes one set of outputs."""
+"""More than one host: two CPU processes on localhost (gloo collectives) give the same E and
+gradient as one process; the command line's --distributed run writes one set of outputs; and, in
+one process with the join replaced by a recorder, where `initialize` takes the coordinator,
+process count and id from (arguments, then JAX's environment variables), what it refuses, the
+collectives backend it sets, the writer, and `to_host`'s leaves."""
 
 from __future__ import annotations
 
@@ -10,15 +13,20 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from diffsense.runtime import InputError, initialize, is_writer, to_host
+
 ROOT = Path(__file__).resolve().parents[1]
+_VARS = ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
 
 SCRIPT = """
 import json, sys, jax
 jax.config.update("jax_enable_x64", True)
-from diffsense.runtime._distributed import initialize
+from diffsense.runtime import initialize
 pid, n, address = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
 if n > 1:
     initialize(address, n, pid)
@@ -89,3 +97,102 @@ def test_distributed_flags_need_distributed(tmp_path):
                        cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].startswith("error:")
     assert not (tmp_path / "o").exists()
+
+
+@pytest.fixture
+def joined(monkeypatch):
+    """The calls `initialize` makes: [("config", name, value) | ("join", kwargs)]."""
+    calls: list = []
+    for var in _VARS:
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setattr(jax.distributed, "is_initialized", lambda: False)
+    monkeypatch.setattr(jax.distributed, "initialize", lambda **kw: calls.append(("join", kw)))
+    update = jax.config.update
+    monkeypatch.setattr(jax.config, "update", lambda name, value: calls.append(("config", name, value))
+                        if name == "jax_cpu_collectives_implementation" else update(name, value))
+    return calls
+
+
+def _join(coordinator=None, n=None, pid=None) -> tuple:
+    return ("join", {"coordinator_address": coordinator, "num_processes": n, "process_id": pid})
+
+
+def test_arguments_go_to_jax_after_gloo_is_chosen(joined):
+    initialize("10.0.0.1:1234", 4, 3)
+    initialize()  # nothing given: left to JAX (a cluster scheduler it detects)
+    assert joined == [("config", "jax_cpu_collectives_implementation", "gloo"), _join("10.0.0.1:1234", 4, 3),
+                      ("config", "jax_cpu_collectives_implementation", "gloo"), _join()]
+
+
+def test_environment_variables_fill_what_the_arguments_leave(joined, monkeypatch):
+    monkeypatch.setenv("JAX_COORDINATOR_ADDRESS", "head:999")
+    monkeypatch.setenv("JAX_NUM_PROCESSES", "2")
+    monkeypatch.setenv("JAX_PROCESS_ID", "1")
+    initialize()
+    initialize("given:1", 3, 0)
+    initialize(None, 5, None)
+    monkeypatch.setenv("JAX_NUM_PROCESSES", "")  # set but empty: not given
+    monkeypatch.setenv("JAX_PROCESS_ID", "")
+    initialize()
+    assert [c for c in joined if c[0] == "join"] == [
+        _join("head:999", 2, 1), _join("given:1", 3, 0), _join("head:999", 5, 1), _join("head:999")]
+
+
+def test_a_second_call_does_nothing(joined, monkeypatch):
+    monkeypatch.setattr(jax.distributed, "is_initialized", lambda: True)
+    initialize("10.0.0.1:1234", 0, 5)  # not even checked
+    assert joined == []
+
+
+@pytest.mark.parametrize(("n", "pid", "culprit"), [
+    (0, None, "process count"), (-2, 0, "process count"), (2, 2, "process id 2"), (2, -1, "process id -1"),
+    (1, 1, "process id 1"),
+])
+def test_a_process_count_below_one_or_an_id_outside_it_is_refused(joined, n, pid, culprit):
+    with pytest.raises(InputError, match=culprit):
+        initialize("h:1", n, pid)
+    assert joined == []  # refused before anything is set
+
+
+@pytest.mark.parametrize(("n", "pid"), [(1, 0), (2, 1), (1, None), (None, 7)])
+def test_the_edges_that_are_accepted(joined, n, pid):
+    initialize("h:1", n, pid)
+    assert joined[-1] == _join("h:1", n, pid)
+
+
+def test_bad_environment_variables_are_refused(joined, monkeypatch):
+    monkeypatch.setenv("JAX_NUM_PROCESSES", "two")
+    with pytest.raises(InputError, match="JAX_NUM_PROCESSES"):
+        initialize()
+    monkeypatch.setenv("JAX_NUM_PROCESSES", "2")
+    monkeypatch.setenv("JAX_PROCESS_ID", "3")
+    with pytest.raises(InputError, match="process id 3"):
+        initialize()
+
+
+@pytest.mark.parametrize("error", [RuntimeError, ValueError])
+def test_a_failed_join_is_one_input_error(joined, monkeypatch, error):
+    def refuse(**_):
+        raise error("connection refused")
+
+    monkeypatch.setattr(jax.distributed, "initialize", refuse)
+    with pytest.raises(InputError, match="connection refused") as err:
+        initialize("h:1", 2, 0)
+    assert err.value.__cause__ is None and err.value.__suppress_context__
+
+
+def test_process_0_writes(monkeypatch):
+    assert is_writer()
+    monkeypatch.setattr(jax, "process_index", lambda: 1)
+    assert not is_writer()
+
+
+@pytest.mark.parametrize("processes", [1, 2])
+def test_to_host_gives_numpy_leaves_with_every_value(monkeypatch, processes):
+    monkeypatch.setattr(jax, "process_count", lambda: processes)
+    tree = {"e2": jnp.asarray(2.5), "grad": (jnp.arange(3.0), 4.0), "n": 3}
+    host = to_host(tree)
+    assert jax.tree.structure(host) == jax.tree.structure(tree)
+    assert all(type(leaf) is np.ndarray for leaf in jax.tree.leaves(host))
+    np.testing.assert_array_equal(host["grad"][0], [0.0, 1.0, 2.0])
+    assert float(host["e2"]) == 2.5 and float(host["grad"][1]) == 4.0 and int(host["n"]) == 3

@@ -1,6 +1,7 @@
 """Interrupts, signals and output folders: `run(main)` ends on SIGINT/SIGTERM with one line and
 exit 130/143 even inside a JAX host callback, leaving no temporary behind; output sets replace
-each other whole; unwritable output folders fail fast; files get the umask's mode."""
+each other whole; unwritable output folders are refused before any work; files get the umask's
+mode."""
 
 from __future__ import annotations
 
@@ -15,12 +16,11 @@ from pathlib import Path
 
 import pytest
 
-from diffsense.runtime import _io
-from diffsense.cli._run import run
-from diffsense.runtime._errors import InputError
+import diffsense as ds
+from diffsense import runtime
 
 ROOT = Path(__file__).resolve().parents[1]
-MANIFEST = _io.MANIFEST
+MANIFEST = "manifest.json"
 
 # A CLI whose main prints "ready" on stdout, then waits: in a host callback, in plain Python, in
 # the middle of an output set, or in the middle of one atomic file.
@@ -28,12 +28,11 @@ SCRIPT = textwrap.dedent(
     """
     import os, sys, time, types
     from pathlib import Path
-    for name in ("diffsense", "diffsense.cli"):  # the modules under test without the package
-        mod = types.ModuleType(name)             # __init__ files (jax, flax: seconds per child)
-        mod.__path__ = [os.path.join(sys.argv[3], *name.split("."))]
-        sys.modules[name] = mod
-    from diffsense.runtime import _io
-    from diffsense.cli._run import run
+    package = types.ModuleType("diffsense")  # the packages under test without diffsense/__init__.py
+    package.__path__ = [os.path.join(sys.argv[3], "diffsense")]  # (the stages: seconds per child)
+    sys.modules["diffsense"] = package
+    from diffsense import runtime
+    from diffsense.cli import run
 
     mode, folder = sys.argv[1], Path(sys.argv[2])
 
@@ -50,13 +49,13 @@ SCRIPT = textwrap.dedent(
         elif mode == "python":
             ready()
         elif mode == "set":
-            with _io.output_set(folder) as staging:
-                _io.write_json(staging / "result.json", {"run": 2})
-                with _io.atomic_open(staging / "sub" / "fig.png") as f:
+            with runtime.output_set(folder) as staging:
+                runtime.write_json(staging / "result.json", {"run": 2})
+                with runtime.atomic_open(staging / "sub" / "fig.png") as f:
                     f.write(b"half a figure")
                     ready()
         elif mode == "file":
-            with _io.atomic_open(folder / "data.bin") as f:
+            with runtime.atomic_open(folder / "data.bin") as f:
                 f.write(b"half")
                 ready()
 
@@ -95,8 +94,8 @@ def test_sigint_and_sigterm_end_with_one_line(tmp_path, mode):
 
 def test_interrupted_set_leaves_the_previous_set_and_no_temporary(tmp_path):
     out = tmp_path / "out"
-    with _io.output_set(out) as staging:
-        _io.write_json(staging / "result.json", {"run": 1})
+    with runtime.output_set(out) as staging:
+        runtime.write_json(staging / "result.json", {"run": 1})
         (staging / "old.txt").write_text("first run")
     before = _tree(out)
     procs = [(_start(tmp_path, "set", out), signal.SIGINT), (_start(tmp_path, "file", tmp_path / "f"), signal.SIGTERM)]
@@ -108,14 +107,14 @@ def test_interrupted_set_leaves_the_previous_set_and_no_temporary(tmp_path):
 
 def test_a_completed_set_replaces_the_previous_set_whole(tmp_path):
     out = tmp_path / "a" / "out"
-    with _io.output_set(out) as staging:
-        _io.write_json(staging / "result.json", {"run": 1})
-        _io.write_bytes(staging / "radar" / "fig.png", b"radar")
-        _io.write_bytes(staging / "old.txt", b"only in run 1")
+    with runtime.output_set(out) as staging:
+        runtime.write_json(staging / "result.json", {"run": 1})
+        runtime.write_bytes(staging / "radar" / "fig.png", b"radar")
+        runtime.write_bytes(staging / "old.txt", b"only in run 1")
     (out / "notes.txt").write_text("the user's own file")
-    with _io.output_set(out) as staging:
-        _io.write_json(staging / "result.json", {"run": 2})
-        _io.write_bytes(staging / "camera" / "fig.png", b"camera")
+    with runtime.output_set(out) as staging:
+        runtime.write_json(staging / "result.json", {"run": 2})
+        runtime.write_bytes(staging / "camera" / "fig.png", b"camera")
     assert _tree(out).keys() == {"camera/fig.png", "manifest.json", "notes.txt", "result.json"}
     assert json.loads((out / "result.json").read_text()) == {"run": 2}
     assert json.loads((out / MANIFEST).read_text())["files"] == ["camera/fig.png", "result.json"]
@@ -125,78 +124,43 @@ def test_a_completed_set_replaces_the_previous_set_whole(tmp_path):
 
 def test_a_failed_set_changes_nothing(tmp_path):
     out = tmp_path / "new" / "out"
-    with pytest.raises(RuntimeError), _io.output_set(out) as staging:
-        _io.write_bytes(staging / "x.txt", b"x")
+    with pytest.raises(RuntimeError), runtime.output_set(out) as staging:
+        runtime.write_bytes(staging / "x.txt", b"x")
         raise RuntimeError("solver failed")
     assert not (tmp_path / "new").exists()  # the folders the set created are gone with it
     out.mkdir(parents=True)
     (out / "result.json").mkdir()  # a folder in the way: refused before anything moves
-    with pytest.raises(InputError, match="in the way"), _io.output_set(out) as staging:
-        _io.write_bytes(staging / "result.json", b"{}")
+    with pytest.raises(ds.InputError, match="in the way"), runtime.output_set(out) as staging:
+        runtime.write_bytes(staging / "result.json", b"{}")
     assert [p.name for p in out.iterdir()] == ["result.json"]
 
 
 def test_check_writable(tmp_path):
-    _io.check_writable(tmp_path / "new" / "deeper")  # creatable: fine, and nothing is created
+    runtime.check_writable(tmp_path / "new" / "deeper")  # creatable: fine, and nothing is created
     assert list(tmp_path.iterdir()) == []
     (tmp_path / "file.txt").write_text("x")
     for bad, needle in ((tmp_path / "file.txt", "not a folder"), (tmp_path / "file.txt" / "out", "not a folder")):
-        with pytest.raises(InputError, match=needle) as info:
-            _io.check_writable(bad)
+        with pytest.raises(ds.InputError, match=needle) as info:
+            runtime.check_writable(bad)
         assert "\n" not in str(info.value)
     if Path("/proc/self").is_dir():  # read-only for root too
-        with pytest.raises(InputError, match="not writable"):
-            _io.check_writable("/proc/diffsense-out")
+        with pytest.raises(ds.InputError, match="not writable"):
+            runtime.check_writable("/proc/diffsense-out")
     if os.geteuid() != 0:  # root ignores permission bits
         locked = tmp_path / "locked"
         locked.mkdir(mode=0o555)
-        with pytest.raises(InputError, match="not writable"):
-            _io.check_writable(locked / "out")
+        with pytest.raises(ds.InputError, match="not writable"):
+            runtime.check_writable(locked / "out")
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o077, 0o002])
 def test_files_get_the_umask_mode(tmp_path, umask):
     old = os.umask(umask)
     try:
-        _io.write_bytes(tmp_path / "plain.bin", b"x")
-        with _io.output_set(tmp_path / "out") as staging:
-            _io.write_bytes(staging / "set.bin", b"y")
+        runtime.write_bytes(tmp_path / "plain.bin", b"x")
+        with runtime.output_set(tmp_path / "out") as staging:
+            runtime.write_bytes(staging / "set.bin", b"y")
     finally:
         os.umask(old)
     for path in (tmp_path / "plain.bin", tmp_path / "out" / "set.bin", tmp_path / "out" / MANIFEST):
         assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask, path
-
-
-def test_run_turns_os_errors_into_one_line_and_restores_handlers(tmp_path, capsys):
-    (tmp_path / "file.txt").write_text("x")
-    before = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
-    with pytest.raises(SystemExit) as info:
-        run(lambda: _io.write_bytes(tmp_path / "file.txt" / "result.json", b"{}"))
-    assert info.value.code == 2
-    err = capsys.readouterr().err
-    assert err.startswith("error: ") and err.count("\n") == 1 and "file.txt" in err, err
-    assert (signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)) == before
-    with pytest.raises(SystemExit) as info:
-        run(lambda: 0)
-    assert info.value.code == 0
-
-
-def test_an_entry_point_ends_at_once_with_its_code_and_its_output_flushed(tmp_path):
-    """`run(main, end_process=True)` skips the interpreter's teardown (`os._exit`): what main
-    printed, even unflushed, still arrives, and the exit code is main's."""
-    script = tmp_path / "entry.py"
-    script.write_text(textwrap.dedent("""
-        import atexit, sys
-        from diffsense.cli._run import run
-        atexit.register(lambda: print("teardown ran"))
-        def main():
-            print("printed " * 2000)  # more than one buffer, on a pipe
-            sys.stderr.write("to stderr")
-            return 3
-        run(main, end_process=True)
-    """))
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=120)
-    assert proc.returncode == 3
-    assert proc.stdout.strip() == ("printed " * 2000).strip()  # all of it, and no teardown line
-    assert proc.stderr == "to stderr"

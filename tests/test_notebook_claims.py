@@ -15,7 +15,6 @@ import numpy as np
 
 from tests._notebook_text import NUMBER, printed, prose, says, table
 
-
 # -- 01: gradient sensitivity -------------------------------------------------------------------
 NB01 = "01_gradient_sensitivity"
 

@@ -16,8 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.metrics import make_objective
-from diffsense.metrics._build import _pad_vehicles
+from diffsense.metrics import make_objective, pad_vehicles
 from diffsense.sensors import Radar
 from diffsense.tracks import prediction_frames
 from tests._synthetic import straight_scene
@@ -53,7 +52,7 @@ def objectives():
     b = _stack([_variant(3.0, False)])
     assert (a.num_vehicles, b.num_vehicles) == (5, 3)
     draws = jax.random.normal(jax.random.PRNGKey(3), (3, 2, 101, 5), jnp.float64)
-    pooled = jax.tree.map(lambda x, y: jnp.concatenate([x, y]), a, _pad_vehicles(b, 5))
+    pooled = jax.tree.map(lambda x, y: jnp.concatenate([x, y]), a, pad_vehicles(b, 5))
     return (_objective(pooled, [0, 0, 1], draws, ("A", "B")),
             _objective(a, [0, 0], draws[:2], ("A",)),
             _objective(b, [0], draws[2:, :, :, :3], ("B",)))
@@ -92,26 +91,3 @@ def test_per_scenario_curves_follow_the_scenario_index(evaluations):
     np.testing.assert_allclose(hard.sq_instant, np.concatenate([hard_a.sq_instant, hard_b.sq_instant], axis=1),
                                rtol=1e-12)
     assert not np.allclose(hard_a.rmse_sensor[:, 0], hard_b.rmse_sensor[:, 0])
-
-
-def test_padding_adds_absent_slots_and_leaves_the_real_vehicles():
-    b = _stack([_variant(3.0, False)])
-    padded = _pad_vehicles(b, 5)
-    assert padded.num_vehicles == 5 and not np.any(padded.present[..., 3:])
-    for name in ("s_m", "x_m", "y_m", "speed_mps", "lane", "present", "length_m", "kind", "role"):
-        np.testing.assert_array_equal(getattr(padded, name)[..., :3], getattr(b, name), err_msg=name)
-
-
-def test_simulated_scenarios_are_pooled_scenario_major():
-    from diffsense.metrics import simulate_scenes
-    from diffsense.predictors import CSLSTM_SPEC
-
-    key, reach = jax.random.PRNGKey(0), dict(spec=CSLSTM_SPEC, sensors=[Radar.from_toml()], stride_frames=20)
-    scenes, index, names, weather = simulate_scenes(["sc01", "sc02"], 2, key, **reach)
-    assert index.tolist() == [0, 0, 1, 1] and names == ("sc01", "sc02")
-    assert scenes.x_m.shape[0] == 4 and np.shape(weather.rain_mm_h) == (4,)
-    # Row 2 is sc02's nominal variant (variant 0 is the scenario as written, whatever the key;
-    # two variants again, so the simulation compiled above is reused).
-    alone, _, _, _ = simulate_scenes(["sc02"], 2, jax.random.PRNGKey(5), **reach)
-    np.testing.assert_allclose(scenes.x_m[2, :, : alone.num_vehicles], alone.x_m[0])
-    assert not np.allclose(scenes.x_m[0, :, :2], scenes.x_m[2, :, :2])

@@ -1,19 +1,21 @@
-"""`python -m diffsense.predictors parity|card`: reference-layout outputs of both published
-checkpoints against the numpy forward; bad input is one line and exit code 2, nothing written."""
+"""`diffsense predict parity|card` (`python -m diffsense.predictors`): reference-layout outputs of
+both published checkpoints against the numpy forward; bad input is one line naming its culprit
+and exit code 2, nothing written."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
+import _numpy_cslstm
+import _torch_zip
 import numpy as np
 import pytest
 
-import _numpy_cslstm
-import _torch_zip
 from diffsense import cli as _cli
-from diffsense.predictors import init_predictor, read_state_dict, state_dict_from_model
 from diffsense.cli.predict import main
+from diffsense.predictors import init_predictor, read_state_dict, save_weights, state_dict_from_model
 
 
 def _run(argv: list[str]) -> int:
@@ -80,10 +82,10 @@ def test_parity_cli_bad_inputs(tmp_path, capsys, generated_checkpoint):
     np.savez(tmp_path / "nomask.npz", hist=hist, nbrs=nbrs)
     out = tmp_path / "out.npz"
     cases = [
-        ("short.npz", "nbrs must be"),
-        ("nan.npz", "finite"),
-        ("nomask.npz", "missing array 'mask'"),
-        ("absent.npz", "inputs not found"),
+        ("short.npz", "short.npz: nbrs"),
+        ("nan.npz", "nan.npz: hist"),
+        ("nomask.npz", "'mask'"),
+        ("absent.npz", "absent.npz"),
     ]
     for name, needle in cases:
         args = ["parity", "--checkpoint", ckpt, "--inputs", str(tmp_path / name), "--out", str(out)]
@@ -106,15 +108,10 @@ def test_cli_exit_code_two_in_a_real_process(tmp_path):
 
 
 def test_card_prints_the_model_card(tmp_path, capsys):
-    import json
-
-    from diffsense.predictors import save_weights
-    from diffsense.predictors._model import model_from_params, param_shapes
-
-    params = {k: {kk: np.zeros(vv, np.float32) for kk, vv in v.items()} for k, v in param_shapes(False).items()}
     path = tmp_path / "w.msgpack"
-    save_weights(path, model_from_params(False, params), {"steps": 7, "validation": {"horizon_s": [1, 2]}})
+    save_weights(path, init_predictor().model(), {"steps": 7, "validation": {"horizon_s": [1, 2]}})
     assert _run(["card", "--weights", str(path)]) == 0
     assert json.loads(capsys.readouterr().out) == {"steps": 7, "validation": {"horizon_s": [1, 2]}}
     assert _run(["card", "--weights", str(tmp_path / "none.msgpack")]) == 2
-    assert "no model card" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "none" in err

@@ -1,11 +1,15 @@
-"""The predictor computing in float32 inside a float64 E(r) (`Problem.predictor_dtype`).
+"""A predictor computing at its own float precision (`with_compute_dtype`) and the objective's
+choice of it (`Problem.predictor_dtype`).
 
-The cast must not change what E means: E and dE/dr with a float32 CS-LSTM agree with the
-all-float64 objective's value and with central finite differences of it, to float32's rounding;
-the output and E stay float64; the choice is checked at the door.
+The cast hands every float input to the predictor in its dtype and its output back in the
+caller's, with the identity as its derivative; it must not change what E means: E and dE/dr with a
+float32 CS-LSTM agree with the all-float64 objective's value and with central finite differences
+of it, to float32's rounding; the output and E stay float64; the choice is checked at the door.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import equinox as eqx
 import jax
@@ -14,8 +18,14 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense.runtime._errors import InputError
-from diffsense.predictors import CastPredictor, PredictorInputs, init_predictor, predict_mean, with_compute_dtype
+from diffsense.predictors import (
+    CSLSTM_SPEC,
+    CastPredictor,
+    PredictorInputs,
+    init_predictor,
+    with_compute_dtype,
+)
+from diffsense.runtime import InputError
 
 
 def _inputs(dtype, b=6, m=3, seed=0):
@@ -44,13 +54,58 @@ def test_cast_runs_the_inner_predictor_in_float32_and_returns_float64():
     assert np.max(np.abs(full - np.asarray(out))) < 1e-5
 
 
-def test_cast_is_one_level_deep_and_keeps_the_spec():
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
+class _Probe:
+    """A predictor with float32 parameters (as the CS-LSTM's are): its output is hist's last point
+    times `scale` plus the machine epsilon of the dtype it computes in; it checks that every
+    float input comes in that one dtype, the integers untouched."""
+
+    scale: jax.Array
+    spec = CSLSTM_SPEC
+    validation_rmse_m = (0.5, 1.0)
+
+    def __call__(self, inputs: PredictorInputs):
+        assert inputs.nbr_slot.dtype == jnp.int32
+        assert inputs.hist.dtype == inputs.nbr_hist.dtype == inputs.nbr_weight.dtype
+        last = inputs.hist[:, -1:, :] * self.scale
+        return jnp.broadcast_to(last + jnp.finfo(inputs.hist.dtype).eps, (last.shape[0], 25, 2))
+
+
+def _ones(dtype):
+    return PredictorInputs(hist=jnp.full((2, 16, 2), 1.0, dtype), nbr_hist=jnp.zeros((2, 3, 16, 2), dtype),
+                           nbr_slot=jnp.zeros((2, 3), jnp.int32), nbr_weight=jnp.zeros((2, 3), dtype))
+
+
+@pytest.mark.parametrize("given", [np.float32, np.float64])
+@pytest.mark.parametrize("inside", ["float32", "float64"])
+def test_the_cast_computes_in_its_dtype_and_hands_back_the_callers(given, inside):
+    out = with_compute_dtype(_Probe(scale=jnp.asarray(1.0, jnp.float32)), inside)(_ones(given))
+    assert out.dtype == given and out.shape == (2, 25, 2)
+    assert np.all(np.asarray(out) == np.asarray(1.0 + np.finfo(inside).eps, given))
+
+
+def test_the_cast_is_differentiable_as_the_identity_and_keeps_the_inner_predictors_face():
+    probe = _Probe(scale=jnp.asarray(1.0, jnp.float32))
+    inside32 = with_compute_dtype(probe, "float32")
+    # d out / d hist = 25 outputs x scale at the last point, 0 before
+    g = jax.grad(lambda h: inside32(dataclasses.replace(_ones(jnp.float64), hist=h)).sum())(jnp.full((2, 16, 2), 1.0))
+    assert g.dtype == jnp.float64
+    assert np.all(np.asarray(g[:, -1]) == 25.0) and np.all(np.asarray(g[:, :-1]) == 0.0)
+    assert inside32.spec is CSLSTM_SPEC and inside32.validation_rmse_m == (0.5, 1.0)
+    assert CastPredictor(inner=object(), dtype="float32").validation_rmse_m is None
+    leaves = jax.tree.leaves(inside32)
+    assert len(leaves) == 1 and leaves[0] is probe.scale  # the dtype is static, the weights leaves
+
+
+def test_the_cast_is_one_level_deep_and_refuses_other_dtypes():
     inner = init_predictor(seed=1)
     twice = with_compute_dtype(with_compute_dtype(inner, "float32"), "float64")
     assert isinstance(twice, CastPredictor) and twice.inner is inner and twice.dtype == "float64"
     assert twice.spec == inner.spec and with_compute_dtype(inner, None) is inner
-    with pytest.raises(ValueError, match="float16"):
-        with_compute_dtype(inner, "float16")
+    for dtype in ("float16", "bfloat16"):
+        with pytest.raises(ValueError, match=dtype):
+            with_compute_dtype(inner, dtype)
 
 
 @pytest.fixture(scope="module")
@@ -89,11 +144,10 @@ def test_float32_predictor_value_and_gradient_match_float64_finite_differences(o
 
 
 def test_predictor_dtype_is_checked_at_the_door():
-    with pytest.raises(InputError, match="predictor_dtype must be auto, float32 or float64"):
+    with pytest.raises(InputError, match="predictor_dtype"):
         ds.Problem(predictor_dtype="float16")
-    with pytest.raises(InputError, match="needs float64"):
+    with pytest.raises(InputError, match="float64"):
         ds.Problem(float64=False, predictor_dtype="float64")
-    assert ds.Problem().predictor_dtype == ds.Problem.from_toml().predictor_dtype == "auto"
 
 
 def test_auto_casts_the_cslstm_only():

@@ -1,4 +1,5 @@
-"""Recorded traffic: highD and NGSIM files of the same motion load to the same scene.
+"""Recorded traffic: highD and NGSIM files of the same motion load to the same scene; lane changes
+by hysteresis; the window, ego and roles of recorded_scenes on hand-built tracks.
 
 The files are written by tests/_recorded_files.py from a closed-form motion; expected values below
 are that motion evaluated by hand (s = s0 + v t ...), not the loaders' own formulas.
@@ -8,16 +9,13 @@ from __future__ import annotations
 
 import math
 
+import _recorded_files as files
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import _recorded_files as files
-from diffsense.runtime._errors import InputError
-from diffsense.scene import BACKGROUND, CAR, EGO, LEAD, TARGET, TARGET_LEAD, TRUCK, load_highd, load_ngsim, load_recorded
-from diffsense.scene._highd import read_highd
-from diffsense.scene._ngsim import read_ngsim
-from diffsense.scene._recorded import group_rows, lane_changes, recorded_scenes
+from diffsense import scene as sc
+from diffsense.runtime import InputError
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +29,8 @@ def folder(tmp_path_factory):
 @pytest.fixture(scope="module")
 def loaded(folder):
     """(highD scene, highD info, NGSIM scene, NGSIM info) in float64."""
-    (h,), (hi,) = recorded_scenes(read_highd(folder / "01_tracks.csv"), dtype=jnp.float64)
-    (n,), (ni,) = recorded_scenes(read_ngsim(folder / "trajectories.csv"), dtype=jnp.float64)
+    (h,), (hi,) = sc.recorded_scenes(sc.read_highd(folder / "01_tracks.csv"), dtype=jnp.float64)
+    (n,), (ni,) = sc.recorded_scenes(sc.read_ngsim(folder / "trajectories.csv"), dtype=jnp.float64)
     return h, hi, n, ni
 
 
@@ -42,8 +40,8 @@ def test_window_frames_and_roles(loaded):
         assert (info.start_s, info.crossing_s) == (5.0, 10.0)
         # Ego 2 is in the lane the target changes into; decoy 3 (nearer, old lane) is background.
         assert info.vehicle_ids == (2, 1, 4, 5, 3)
-        assert scene.role.tolist() == [EGO, TARGET, LEAD, TARGET_LEAD, BACKGROUND]
-        assert scene.kind.tolist() == [CAR, CAR, TRUCK, CAR, CAR]
+        assert scene.role.tolist() == [sc.EGO, sc.TARGET, sc.LEAD, sc.TARGET_LEAD, sc.BACKGROUND]
+        assert scene.kind.tolist() == [sc.CAR, sc.CAR, sc.TRUCK, sc.CAR, sc.CAR]
         assert bool(scene.present.all())
 
 
@@ -85,7 +83,7 @@ def test_both_formats_give_the_same_scene(loaded):
 
 
 def test_highd_direction_one_is_mirrored(tmp_path, loaded):
-    (m,), _ = recorded_scenes(read_highd(files.write_highd(tmp_path, direction=1)), dtype=jnp.float64)
+    (m,), _ = sc.recorded_scenes(sc.read_highd(files.write_highd(tmp_path, direction=1)), dtype=jnp.float64)
     h = loaded[0]
     offset = m.s_m - h.s_m  # s is measured from another origin, and grows along travel in both
     np.testing.assert_allclose(offset, offset[0, 0], atol=1e-6)
@@ -95,108 +93,92 @@ def test_highd_direction_one_is_mirrored(tmp_path, loaded):
 
 
 def test_float32_default_and_dispatcher(folder):
-    (h,) = load_highd(folder / "01_tracks.csv")
+    (h,) = sc.load_highd(folder / "01_tracks.csv")
     assert h.s_m.dtype == jnp.float32 and h.lane.dtype == jnp.int32
-    (n,) = load_recorded(f"ngsim:{folder / 'trajectories.csv'}")
+    (n,) = sc.load_recorded(f"ngsim:{folder / 'trajectories.csv'}")
     np.testing.assert_allclose(n.s_m, h.s_m, atol=2e-3)
     for spec in ("waymo:x.csv", "highd", "ngsim:"):
-        with pytest.raises(InputError, match="highd:PATH"):
-            load_recorded(spec)
+        with pytest.raises(InputError, match=repr(spec)):
+            sc.load_recorded(spec)
 
 
 def test_hysteresis():
     frame = np.arange(40)
     clean = np.array([3] * 20 + [2] * 20)
-    assert lane_changes(clean, frame, 10) == [(20, 3, 2)]
+    assert sc.lane_changes(clean, frame, 10) == [(20, 3, 2)]
     # A 0.4 s flicker is no change; the change happens at the run that holds.
     noisy = np.array([3] * 10 + [2] * 3 + [3] * 2 + [2] * 25)
-    assert lane_changes(noisy, frame, 10) == [(15, 3, 2)]
-    assert lane_changes(np.array(([3] * 4 + [2] * 4) * 5), frame, 10) == []
-    assert lane_changes(np.array([3] * 20 + [1] * 20), frame, 10) == []  # not adjacent
+    assert sc.lane_changes(noisy, frame, 10) == [(15, 3, 2)]
+    assert sc.lane_changes(np.array(([3] * 4 + [2] * 4) * 5), frame, 10) == []
+    assert sc.lane_changes(np.array([3] * 20 + [1] * 20), frame, 10) == []  # not adjacent
     gap = np.concatenate([np.arange(20), np.arange(25, 45)])
-    assert lane_changes(clean, gap, 10) == [(20, 3, 2)]
-
-
-def test_duplicate_rows_keep_the_first():
-    ids = np.array([5, 5, 2, 5, 2])
-    frames = np.array([2, 1, 1, 1, 2])
-    assert [g.tolist() for g in group_rows(ids, frames)] == [[2, 4], [1, 0]]
+    assert sc.lane_changes(clean, gap, 10) == [(20, 3, 2)]
 
 
 def test_ego_falls_back_to_the_original_lane(tmp_path):
     path = files.write_ngsim(tmp_path, drop=(2,))
-    _, (info,) = recorded_scenes(read_ngsim(path))
+    _, (info,) = sc.recorded_scenes(sc.read_ngsim(path))
     assert info.vehicle_ids[:2] == (3, 1)
-    with pytest.raises(InputError, match="none with the target and an ego"):
-        load_ngsim(files.write_ngsim(tmp_path, drop=(2, 3), name="noego.csv"))
+    with pytest.raises(InputError, match="noego.csv"):  # no lane change with an ego: no scene
+        sc.load_ngsim(files.write_ngsim(tmp_path, drop=(2, 3), name="noego.csv"))
 
 
-def _one_line(excinfo, *parts):
-    message = str(excinfo.value)
-    assert "\n" not in message
-    for part in parts:
-        assert str(part) in message, (part, message)
-
-
-def test_refusals_highd(tmp_path):
-    tracks = files.write_highd(tmp_path)
-    files.drop_column(tracks, "laneId")
-    with pytest.raises(InputError) as e:
-        load_highd(tracks)
-    _one_line(e, tracks, "line 1", "laneId")
+def test_the_loaders_refuse_in_one_line_naming_the_culprit(tmp_path):
+    # (every reader's refusal: tests/test_recorded_readers.py)
     tracks = files.write_highd(tmp_path)
     files.edit_cell(tracks, 7, "x", "12.5abc")
-    with pytest.raises(InputError) as e:
-        load_highd(tracks)
-    _one_line(e, tracks, "line 7", "'x'", "12.5abc")
-    meta = tmp_path / "01_recordingMeta.csv"
-    files.edit_cell(meta, 2, "lowerLaneMarkings", "16.0")
-    with pytest.raises(InputError) as e:
-        load_highd(tracks)
-    _one_line(e, meta, "line 2", "lowerLaneMarkings")
-    meta.unlink()
-    with pytest.raises(InputError) as e:
-        load_highd(tracks)
-    _one_line(e, tracks, "01_recordingMeta.csv")
-    (tmp_path / "tracks.csv").write_text("frame\n1\n")
-    with pytest.raises(InputError) as e:
-        load_highd(tmp_path / "tracks.csv")
-    _one_line(e, "NN_tracks.csv")
+    path = files.write_ngsim(tmp_path)
+    for call, culprits in ((lambda: sc.load_highd(tracks), (tracks, "line 7", "'x'", "12.5abc")),
+                           (lambda: sc.load_ngsim(files.write_ngsim(tmp_path, drop=(1,), name="straight.csv")),
+                            ("straight.csv",)),  # no lane change found
+                           (lambda: sc.load_ngsim(path, duration_s=5.0), ("duration_s",))):
+        with pytest.raises(InputError) as e:
+            call()
+        assert "\n" not in str(e.value) and all(str(c) in str(e.value) for c in culprits), str(e.value)
 
 
-def test_refusals_ngsim(tmp_path):
-    path = files.write_ngsim(tmp_path)
-    files.drop_column(path, "Lane_ID")
-    with pytest.raises(InputError) as e:
-        load_ngsim(path)
-    _one_line(e, path, "line 1", "Lane_ID")
-    path = files.write_ngsim(tmp_path)
-    files.edit_cell(path, 12, "Local_Y", "nan")
-    with pytest.raises(InputError) as e:
-        load_ngsim(path)
-    _one_line(e, path, "line 12", "Local_Y")
-    path = files.write_ngsim(tmp_path)
-    files.edit_cell(path, 3, "v_Class", "7")
-    with pytest.raises(InputError) as e:
-        load_ngsim(path)
-    _one_line(e, path, "line 3", "v_Class")
-    with pytest.raises(InputError) as e:
-        load_ngsim(files.write_ngsim(tmp_path, drop=(1,), name="straight.csv"))
-    _one_line(e, "straight.csv", "no lane change found")
-    with pytest.raises(InputError) as e:
-        load_ngsim(tmp_path / "absent.csv")
-    _one_line(e, "absent.csv", "no such file")
-    with pytest.raises(InputError, match="duration_s"):
-        load_ngsim(path, duration_s=5.0)
+def track(vehicle_id, frames, s0, lane_id, metres_per_frame=2.0):
+    frame = np.asarray(frames)
+    lane_id = np.asarray(lane_id)
+    return sc.Track(vehicle_id=vehicle_id, frame=frame, s_m=s0 + metres_per_frame * frame, d_m=(3 - lane_id + 0.5) * 3.5,
+                 speed_mps=np.full(frame.shape, 20.0), lane=3 - lane_id, lane_id=lane_id, length_m=4.5,
+                 width_m=1.8, kind=sc.CAR, carriageway=0)
 
 
-def test_blank_lines_are_skipped_and_counted(tmp_path, loaded):
-    path = files.write_ngsim(tmp_path)
-    lines = path.read_text().splitlines()
-    path.write_text("\n".join(lines[:5] + [""] + lines[5:]) + "\n")  # numpy's reader is bypassed
-    (scene,) = load_ngsim(path, dtype=jnp.float64)
-    np.testing.assert_array_equal(scene.s_m, loaded[2].s_m)
-    files.edit_cell(path, 12, "Local_X", "x")
-    with pytest.raises(InputError) as e:
-        load_ngsim(path)
-    _one_line(e, path, "line 12", "Local_X")
+# 10 Hz. The target (id 1) crosses from lane id 2 to 1 at frame 50; the ego (id 2) drives behind
+# it in lane id 1; id 3 is recorded exactly over the 8 s window from 2 s before the crossing
+# (frames 30 to 110), id 4 misses its last frame.
+FRAMES = np.arange(0, 121)
+REC = sc.Recording(path="hand", frame_rate_hz=10.0, tracks=(
+    track(1, FRAMES, 40.0, np.where(FRAMES < 50, 2, 1)),
+    track(2, FRAMES, 10.0, np.ones_like(FRAMES)),
+    track(3, np.arange(30, 111), 0.0, np.full(81, 2)),
+    track(4, np.arange(30, 110), 60.0, np.full(80, 1)),
+))
+
+
+def test_a_vehicle_recorded_exactly_over_the_window_is_kept_and_one_frame_short_is_not():
+    (scene,), (info,) = sc.recorded_scenes(REC, duration_s=8.0, crossing_at_s=2.0, dtype=jnp.float64)
+    assert info.vehicle_ids == (2, 1, 3) and (info.start_s, info.crossing_s) == (3.0, 5.0)
+    assert scene.s_m.shape == (81, 3)
+    np.testing.assert_allclose(scene.s_m[:, 2], 2.0 * np.arange(30, 111), rtol=1e-15)
+    for name in ("d_m", "x_m", "y_m", "heading_rad", "road_angle_rad", "speed_mps", "lane"):
+        assert getattr(scene, name).shape == (81, 3), name
+
+
+def test_the_ego_is_strictly_behind_the_target_at_the_windows_first_frame():
+    # Vehicle 5, in the lane the target enters, is abreast of it at the window's first frame
+    # (frame 30, s = 100 m) and behind it from the next frame on (it drives 1 m a frame, not 2).
+    rec = sc.Recording(path="hand", frame_rate_hz=10.0, tracks=(*REC.tracks, track(5, FRAMES, 70.0, np.ones_like(FRAMES), 1.0)))
+    _, (info,) = sc.recorded_scenes(rec, duration_s=8.0, crossing_at_s=2.0, dtype=jnp.float64)
+    assert info.vehicle_ids[:2] == (2, 1)
+
+
+def test_load_recorded_reads_either_prefix_in_any_case_and_a_colon_in_the_path(tmp_path):
+    folder = tmp_path / "a:b"
+    folder.mkdir()
+    ngsim = files.write_ngsim(folder)
+    highd = files.write_highd(folder)
+    (by_ngsim,) = sc.load_recorded(f"NGSIM:{ngsim}")
+    (by_highd,) = sc.load_recorded(f"HighD:{highd}")
+    np.testing.assert_allclose(by_ngsim.s_m, by_highd.s_m, atol=2e-3)

@@ -1,17 +1,15 @@
-"""Recorded traffic end to end: highD- and NGSIM-format files written here run the main job, and a
-malformed row is one line, exit 2, nothing written."""
+"""Recorded traffic end to end: highD- and NGSIM-format files written here run the main job (one
+parameter and a suite); what a Problem refuses of their names: tests/test_problem.py."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import diffsense as ds
-from tests._recorded_files import edit_cell, write_highd, write_ngsim
+from tests._recorded_files import write_highd, write_ngsim
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -27,25 +25,6 @@ def test_the_main_job_runs_on_recorded_scenes(tmp_path, kind):
     assert content["scenarios"] == [f"{path.name}#0"]
     assert 30.0 <= result.r_star["hfov_deg"] <= 180.0 and np.isfinite(result.E_hard_star)
     assert result.E_hard_star <= min(p.E_hard for p in result.sweep)
-
-
-def test_recorded_scenes_are_checked_before_any_work(tmp_path):
-    with pytest.raises(ds.InputError, match="'highd:PATH' or 'ngsim:PATH'"):
-        ds.Problem(scenes="waymo:x.csv")
-    with pytest.raises(ds.InputError, match="is not a file"):
-        ds.Problem(scenes=f"ngsim:{tmp_path / 'missing.csv'}")
-
-
-def test_a_malformed_row_is_one_line_and_nothing_is_written(tmp_path):
-    path = write_ngsim(tmp_path)
-    edit_cell(path, 5, "Local_Y", "abc")
-    out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "diffsense.optimise", "--scenes", f"ngsim:{path}", "--out", str(out)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 2, proc.stderr
-    lines = [l for l in proc.stderr.strip().splitlines() if l.startswith("error:")]
-    assert len(lines) == 1 and path.name in lines[0] and "5" in lines[0] and "Traceback" not in proc.stderr
-    assert not out.exists() or [p.name for p in out.iterdir()] == []
 
 
 @pytest.mark.slow

@@ -1,4 +1,5 @@
-"""The sensor inspector: numbers, JSON, coverage plot, and one-line refusals with exit code 2."""
+"""`diffsense inspect`: the link budget's numbers, JSON, the coverage plot, and one-line refusals
+naming their culprit, exit code 2."""
 
 from __future__ import annotations
 
@@ -48,15 +49,15 @@ def test_coverage_plot_is_written(tmp_path, capsys):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["--sensor", "radar", "--hfov", "0"], "hfov_deg = 0 is outside its domain"),
-        (["--sensor", "radar", "--hfov", "400"], "hfov_deg = 400 is outside its domain"),
-        (["--sensor", "radar", "--set", "range_m=-3"], "range_m = -3 is outside"),
-        (["--sensor", "camera", "--hfov", "thirty"], "--hfov: expected numbers"),
-        (["--sensor", "camera", "--set", "focal=3"], "unknown camera parameter 'focal'"),
-        (["--sensor", "sonar"], "invalid choice: 'sonar'"),
-        (["--sensor", "radar", "--at-range", "-1"], "--at-range must be a positive"),
-        (["--sensor", "radar", "--plot", "out.jpeg"], "expected a .png, .pdf or .svg"),
-        (["--sensor", "radar", "--config", "missing.toml"], "config file not found"),
+        (["--sensor", "radar", "--hfov", "0"], "hfov_deg = 0"),
+        (["--sensor", "radar", "--hfov", "400"], "hfov_deg = 400"),
+        (["--sensor", "radar", "--set", "range_m=-3"], "range_m = -3"),
+        (["--sensor", "camera", "--hfov", "thirty"], "'thirty'"),
+        (["--sensor", "camera", "--set", "focal=3"], "'focal'"),
+        (["--sensor", "sonar"], "'sonar'"),
+        (["--sensor", "radar", "--at-range", "-1"], "--at-range"),
+        (["--sensor", "radar", "--plot", "out.jpeg"], "'out.jpeg'"),
+        (["--sensor", "radar", "--config", "missing.toml"], "missing.toml"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(tmp_path, monkeypatch, capsys, argv, message):
@@ -73,5 +74,4 @@ def test_module_entry_point_exits_2_without_traceback():
     proc = subprocess.run([sys.executable, "-m", "diffsense.sensors", "inspect", "--sensor",
                            "radar", "--hfov", "-5"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
-    assert proc.stderr.strip() == "error: radar hfov_deg = -5 is outside its domain (0, 360] deg"
-    assert "Traceback" not in proc.stderr
+    assert proc.stderr.startswith("error: ") and proc.stderr.count("\n") == 1 and "hfov_deg = -5" in proc.stderr

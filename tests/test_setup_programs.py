@@ -1,8 +1,7 @@
-"""A problem's setup as a few whole programs and host arrays: the same bits as op by op.
-
-Building E(r) derives its random keys and draws in single compiled programs (kept on disk, so a
-warm run neither traces nor lowers them) and converts the scenario's constants in numpy. Each is
-checked here against the JAX operations it replaces, bit for bit, in float64 and float32.
+"""A problem's setup as a few whole programs and host arrays: the same bits as op by op. Building
+E(r) derives its random keys and draws in single compiled programs (kept on disk, so a warm run
+neither traces nor lowers them) and converts the scenario's constants in numpy. Each is checked
+against the JAX operations it replaces, bit for bit, in float64 and float32.
 """
 
 from __future__ import annotations
@@ -14,14 +13,18 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from diffsense.runtime._executables import call, keep_in
-from diffsense.study._optimise import seed_keys
 from diffsense.config import replace
 from diffsense.metrics._build import _scenario_keys, _variant_draws
 from diffsense.metrics._estimators import mc_uniforms
-from diffsense.scene import load_road, load_scenario, load_vehicle_models
-from diffsense.scene._road import lane_centre_d_m
+from diffsense.runtime import call, keep_in
+from diffsense.scene import (
+    lane_centre_d_m,
+    load_road,
+    load_scenario,
+    load_vehicle_models,
+)
 from diffsense.scene._variants import scenario_numbers
+from diffsense.study import seed_keys
 
 
 def _bits(key) -> np.ndarray:
@@ -90,9 +93,7 @@ def _check_lane_offsets(dtype, width_m):
     lanes = np.array([cfg.ego.lane, cfg.target_lane, cfg.ego.lane, cfg.target_lane, cfg.adjacent_lane])
     np.testing.assert_array_equal(np.asarray(nums.d_m), np.asarray(jnp.asarray(lane_centre_d_m(road, lanes), dtype)))
     assert nums.d_m.dtype == jnp.dtype(dtype)
-    count = cfg.background.count
-    assert count > 0
-    bg_lanes = np.arange(count) % int(road.num_lanes)
+    bg_lanes = np.arange(cfg.background.count) % int(road.num_lanes)
     np.testing.assert_array_equal(np.asarray(nums.background_d_m),
                                   np.asarray(jnp.asarray(lane_centre_d_m(road, bg_lanes), dtype)))
     # (lane + 1/2) x width, by hand

@@ -1,6 +1,6 @@
 """docs/suite.md's section on the suite under probabilistic laws against the stored benchmark
 results it quotes (fast: no benchmark runs). Every number the section quotes is recomputed here
-from benchmarks/results/suite_laws_d8.json (and the threshold re-run from suite_d8_3468a14.json),
+from benchmarks/results/suite_laws_d8.json (and the threshold re-run from suite_d8_threshold_rerun.json),
 so a re-run that changes a result fails until the text says what the new results show."""
 
 from __future__ import annotations
@@ -94,7 +94,7 @@ def test_the_surrogate_and_the_draws():
 
 
 def test_the_threshold_rerun_matches_the_stored_table():
-    old, new = _result("suite_d8.json"), _result("suite_d8_3468a14.json")
+    old, new = _result("suite_d8.json"), _result("suite_d8_threshold_rerun.json")
     for method in ("CMA-ES", "TPE", "random"):
         assert round(new["rows"][method]["final_J_median"], 4) == round(old["rows"][method]["final_J_median"], 4)
     assert round(new["best_J"], 4) == round(old["best_J"], 4)

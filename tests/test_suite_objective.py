@@ -11,13 +11,9 @@ import jax
 import numpy as np
 import pytest
 
-from diffsense.metrics import make_objective
-from diffsense.metrics._cost import load_costs, make_cost
-from diffsense.sensors import Camera, Radar
-from diffsense.sensors._fusion import Suite
-from diffsense.solve import Evaluator
-from diffsense.solve._box import BoxConfig, box_solve
-from diffsense.solve._box_fns import BoxFunctions
+from diffsense.metrics import load_costs, make_cost, make_objective
+from diffsense.sensors import Camera, Radar, Suite
+from diffsense.solve import BoxConfig, BoxFunctions, Evaluator, box_solve
 from diffsense.tracks import prediction_frames
 from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
 

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense.scene import TARGET_INDEX, Scene
-from diffsense.sensors._datatypes import Detections
+from diffsense.sensors import Detections
 from diffsense.tracks import build_inputs, ground_truth_detections, true_future
 
 RADIUS_M = 300.0
@@ -29,7 +29,7 @@ def _arc_scene(num_frames: int = 100) -> Scene:
     theta = s / RADIUS_M
     x = RADIUS_M * np.sin(theta) - d * np.sin(theta)
     y = RADIUS_M * (1.0 - np.cos(theta)) + d * np.cos(theta)
-    f = lambda a: jnp.asarray(a, jnp.float64)  # noqa: E731
+    f = lambda a: jnp.asarray(a, jnp.float64)
     return Scene(
         s_m=f(s), d_m=f(d), x_m=f(x), y_m=f(y), heading_rad=f(theta), road_angle_rad=f(theta),
         speed_mps=f(np.full(s.shape, SPEED_MPS)), lane=jnp.asarray(np.broadcast_to([0, 1], s.shape), jnp.int32),
@@ -51,13 +51,18 @@ def test_lane_keeping_on_a_bend_has_no_lateral_motion():
 
 
 def test_a_measurement_error_is_turned_into_the_road_frame_at_the_vehicle():
-    """A 1 m error along world +x, measured where the road points 0.3 rad left of +x, is
-    cos 0.3 = 0.955336 m ahead along the road and sin 0.3 = 0.295520 m to the right of it."""
+    """An error of (2, 1) m in world (x, y), measured where the road points 0.3 rad left of +x
+    (the target at t), is 2 cos 0.3 + sin 0.3 = 2.206193 m ahead along the road and -2 sin 0.3 +
+    cos 0.3 = 0.364296 m to the left of it; 1 s earlier, 15 m back on the bend, the road points
+    0.25 rad left: 2.185229 m and 0.474105 m."""
     scene = _arc_scene()
     np.testing.assert_allclose(float(scene.road_angle_rad[T0, TARGET_INDEX]), 0.3, atol=1e-12)
     gt = ground_truth_detections(scene)
-    det = Detections(p_detect=gt.p_detect, x_m=gt.x_m.at[T0, TARGET_INDEX].add(1.0), y_m=gt.y_m)
+    frames = jnp.asarray([T0 - 10, T0])
+    det = Detections(p_detect=gt.p_detect, x_m=gt.x_m.at[frames, TARGET_INDEX].add(2.0),
+                     y_m=gt.y_m.at[frames, TARGET_INDEX].add(1.0))
     hist = np.asarray(build_inputs(scene, det, jnp.asarray([T0]), "hold").hist[0])
-    np.testing.assert_allclose(hist[-1], [0.955336489, -0.295520207], atol=1e-8)
+    np.testing.assert_allclose(hist[-1], [2.206193185, 0.364296076], atol=1e-8)
+    np.testing.assert_allclose(hist[10], [-15.0 + 2.185228803, 0.474104503], atol=1e-8)
     # the rest of the history is untouched by the error
-    np.testing.assert_allclose(hist[:-1, 1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.delete(hist[:, 1], [10, 15]), 0.0, atol=1e-9)

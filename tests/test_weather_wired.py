@@ -12,38 +12,39 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense.sensors import Weather, camera_p_detect, make_params, radar_p_detect
-from diffsense.sensors._inspect import probe_scene
-from diffsense.sensors._config import load_config
+from diffsense import sensors
+from diffsense.sensors import Weather
+from tests._synthetic import straight_scene
 
 
 def _car_at(range_m: float, mount_x_m: float):
-    return probe_scene(jnp.asarray([mount_x_m + range_m]), jnp.zeros(1), length_m=4.5, width_m=1.8)
+    """The ego and a 4.5 m x 1.8 m car `range_m` ahead of the sensor in its lane, one frame."""
+    return straight_scene([0.0, mount_x_m + range_m], [1, 1], [0.0, 0.0], num_frames=1)
 
 
 def test_rain_shortens_the_radar():
-    config = load_config("radar")
-    params = make_params(config, hfov_deg=30.0, range_m=200.0)
+    config = sensors.load_config("radar")
+    params = sensors.make_params(config, hfov_deg=30.0, range_m=200.0)
     # At 115 m a car's SNR is ~14.3 dB, ~1.1 dB above the 13.2 dB threshold (the link budget in
     # configs/sensors/radar.toml: 122.7 m SNR-limited range). 25 mm/h costs 2 x 11.41 dB/km x
     # 0.115 km = 2.62 dB two-way (ITU-R P.838-3 at 77 GHz): the car drops out.
     scene = _car_at(115.0, config.mount_x_m)
-    clear = radar_p_detect(scene, params, config, mode="hard")[0, 1]
-    rain = radar_p_detect(scene, params, config, mode="hard", weather=Weather(rain_mm_h=25.0))[0, 1]
+    clear = sensors.radar_p_detect(scene, params, config, mode="hard")[0, 1]
+    rain = sensors.radar_p_detect(scene, params, config, mode="hard", weather=Weather(rain_mm_h=25.0))[0, 1]
     assert float(clear) == 1.0 and float(rain) == 0.0
-    near = radar_p_detect(_car_at(60.0, config.mount_x_m), params, config, mode="hard",
+    near = sensors.radar_p_detect(_car_at(60.0, config.mount_x_m), params, config, mode="hard",
                           weather=Weather(rain_mm_h=25.0))[0, 1]
     assert float(near) == 1.0
 
 
 def test_fog_shortens_the_camera():
-    config = load_config("camera")
-    params = make_params(config, hfov_deg=60.0)
+    config = sensors.load_config("camera")
+    params = sensors.make_params(config, hfov_deg=60.0)
     fog = Weather(fog_visibility_m=50.0)  # Koschmieder: contrast range = visibility for C0 = 1
     for r, seen in ((40.0, 1.0), (60.0, 0.0)):
-        p = camera_p_detect(_car_at(r, config.mount_x_m), params, config, mode="hard", weather=fog)[0, 1]
+        p = sensors.camera_p_detect(_car_at(r, config.mount_x_m), params, config, mode="hard", weather=fog)[0, 1]
         assert float(p) == seen
-    assert float(camera_p_detect(_car_at(60.0, config.mount_x_m), params, config, mode="hard")[0, 1]) == 1.0
+    assert float(sensors.camera_p_detect(_car_at(60.0, config.mount_x_m), params, config, mode="hard")[0, 1]) == 1.0
 
 
 @pytest.fixture(scope="module")
@@ -83,9 +84,9 @@ def test_finite_value_and_gradient_over_the_odd(objectives, rain, fog):
 
 
 def test_weather_input_is_checked():
-    with pytest.raises(ds.InputError, match="outside"):
+    with pytest.raises(ds.InputError, match="rain_mm_h"):
         ds.Problem(weather={"rain_mm_h": -1.0})
-    with pytest.raises(ds.InputError, match="unknown weather 'snow'"):
+    with pytest.raises(ds.InputError, match="'snow'"):
         ds.Problem(weather={"snow": 1.0})
-    with pytest.raises(ds.InputError, match="clear-weather"):
+    with pytest.raises(ds.InputError, match="paper"):
         ds.Problem(profile="paper", weather={"rain_mm_h": 5.0})

@@ -42,8 +42,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-# "core" is the package's top level: the modules directly under diffsense/ (name them with --files).
-PACKAGES = ("sensors", "tracks", "metrics", "solve", "predictors", "scene", "report", "config", "train", "cli", "core")
+# Every package of diffsense/ (docs/architecture.md); each has a [mutmut:PACKAGE] section in setup.cfg.
+PACKAGES = ("runtime", "config", "scene", "sensors", "tracks", "predictors", "metrics", "train", "solve", "study",
+            "report", "cli")
 
 
 # A mutant name pattern that matches no mutant: `mutmut run` with it generates the mutants and
@@ -87,8 +88,8 @@ def _export(rev: str, workdir: Path) -> str:
 
 
 def _folder(package: str) -> str:
-    """The package's folder: diffsense/ itself for "core"."""
-    return "diffsense" if package == "core" else f"diffsense/{package}"
+    """The package's folder."""
+    return f"diffsense/{package}"
 
 
 def _configure(workdir: Path, package: str, files: list[str]) -> list[str]:
@@ -192,8 +193,6 @@ def _parse(argv: list[str] | None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.report_only and args.workdir is None:
         parser.error("--report-only needs the --workdir of the run")
-    if args.package == "core" and not args.files and not args.report_only:
-        parser.error("core (the modules directly under diffsense/) needs --files")
     if args.sample is not None and (args.mutants or args.sample < 1):
         parser.error("--sample takes N >= 1, and no --mutants")
     return args

@@ -1,6 +1,6 @@
 """A fast first pass over the mutants a `tools/mutation.py` run left unchecked (docs/mutation.md).
 
-    python tools/mutation_triage.py /tmp/mut/X tests/test_sensor_numerics.py tests/test_mounting.py
+    python tools/mutation_triage.py /tmp/mut/X tests/test_sensor_geometry.py tests/test_mounting.py
     python tools/mutation_triage.py /tmp/mut/X tests/test_detection_laws.py --module _laws.py
 
 mutmut runs, for each mutant, every selected test that reaches the mutated function. For the

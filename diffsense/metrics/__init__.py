@@ -1,5 +1,9 @@
 """Metrics: E_RMSE(r) (the paper's Eq. 12) as a pure equinox Module, its estimators, and the
-per-horizon RMSE of both predictions against the true future."""
+per-horizon RMSE of both predictions against the true future.
+
+`pad_vehicles(scene, width)` pads a batch's vehicle axis with absent cars, so that scenes of
+different vehicle counts pool into one `make_objective` batch.
+"""
 
 from diffsense.metrics._breakdown import breakdown, tracked_summary
 from diffsense.metrics._build import (
@@ -12,7 +16,15 @@ from diffsense.metrics._build import (
     speed_shifted_scenes,
     with_scenes,
 )
-from diffsense.metrics._cost import cost_breakdown, load_costs, make_cost
+from diffsense.metrics._build import _pad_vehicles as pad_vehicles
+from diffsense.metrics._cost import (
+    CostModel,
+    CostTerm,
+    SensorCost,
+    cost_breakdown,
+    load_costs,
+    make_cost,
+)
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
 from diffsense.metrics._estimators import (
@@ -31,8 +43,10 @@ from diffsense.metrics._reference import (
 )
 
 __all__ = [
-    "COVERAGE_PARTS", "QUESTIONS", "breakdown", "cost_breakdown", "coverage_parts", "load_costs", "make_cost",
-    "ESTIMATORS", "PAPER_SCENARIOS", "Estimator", "EstimatorConfig", "HardEvaluation", "Objective",
-    "ObjectiveData", "ReferenceEvaluation", "is_deterministic", "reference_draw_margins", "make_objective", "recorded_scenes", "relaxed_bernoulli", "relevance_reach", "safe_sqrt",
-    "simulate_scenes", "SpeedShiftedScenes", "tracked_summary", "speed_shifted_scenes", "value_and_grad", "with_scenes",
+    "COVERAGE_PARTS", "ESTIMATORS", "PAPER_SCENARIOS", "QUESTIONS", "CostModel", "CostTerm", "Estimator",
+    "EstimatorConfig", "HardEvaluation", "Objective", "ObjectiveData", "ReferenceEvaluation", "SensorCost",
+    "SpeedShiftedScenes", "breakdown", "cost_breakdown", "coverage_parts", "is_deterministic", "load_costs",
+    "make_cost", "make_objective", "pad_vehicles", "recorded_scenes", "reference_draw_margins", "relaxed_bernoulli",
+    "relevance_reach", "safe_sqrt", "simulate_scenes", "speed_shifted_scenes", "tracked_summary", "value_and_grad",
+    "with_scenes",
 ]

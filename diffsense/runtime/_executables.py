@@ -207,7 +207,7 @@ def _compile_and_store(fn: Callable[..., Any], dynamic: Any, path: Path) -> Call
 
     # Compiled afresh by XLA, never read from JAX's persistent cache: an executable JAX loaded
     # from there lacks the code of kernels XLA shares between programs, and its serialisation
-    # fails when loaded ("Function ... not found"; tests/test_executables.py). JAX's flag to
+    # fails when loaded ("Function ... not found"; tests/test_compiled_programs.py). JAX's flag to
     # disable the cache is read once per process, so the compile step itself is replaced here.
     options = []  # the compile options JAX gives XLA, kept for loading (see _deserialize)
     compile_or_get_cached = compiler.compile_or_get_cached

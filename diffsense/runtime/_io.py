@@ -11,7 +11,7 @@ temporary left behind by an interrupt.
 - Every temporary this module creates is registered until it is renamed or removed;
   `abandon_temporaries()` deletes them all for a signal handler about to end the process. The
   registry and every publish share one lock, so that handler (run from another thread, see
-  `diffsense.cli._run`) sees either the temporaries or the finished set, never a half-published one.
+  `diffsense.cli.run`) sees either the temporaries or the finished set, never a half-published one.
 """
 
 from __future__ import annotations
@@ -174,7 +174,7 @@ def output_set(out_dir: str | os.PathLike[str]) -> Iterator[Path]:
     - the new files are moved in (`os.replace`), `manifest.json` last, listing them (a folder
       without a manifest, a first run's, loses only the files the new set overwrites);
     - a new file that would replace a folder is refused (InputError) before anything changes.
-    When the block raises, or the process is interrupted (see `diffsense.cli._run`), the staging
+    When the block raises, or the process is interrupted (see `diffsense.cli.run`), the staging
     folder, and `out` itself if this call created it and it is empty, are removed; the previous
     set stays as it was. Only a hard kill during the few renames of a publish can mix two sets.
     """

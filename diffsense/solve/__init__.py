@@ -8,6 +8,9 @@
     dense_grid_search, basin_check   the brute-force baseline and its basin cross-check
     hard_grid_solve              the hard estimator's search (no gradient): sweep + inner grid
     Evaluator                    a pure objective compiled once, memoised and counted
+    box_solve, BoxConfig         many parameters in a box: Halton sample, BFGS per temperature
+    pareto_sweep, pareto_front   one box solve per cost weight; which (E, cost) are Pareto-optimal
+    near_optimal, explain        the answer's near-optimal set and its flags, in words
 
 Objective protocol: `e2_soft(r, tau) -> E^2 [m^2]` (jax-differentiable in r; tau = 1 is the
 sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, both pure.
@@ -22,6 +25,7 @@ from diffsense.solve._dense import DenseGrid, basin_check, dense_grid_search
 from diffsense.solve._evaluator import Evaluator
 from diffsense.solve._hard_grid import hard_grid_solve
 from diffsense.solve._implicit import argmin, argmin_derivative
+from diffsense.solve._pareto import _pareto_front as pareto_front
 from diffsense.solve._pareto import pareto_sweep
 from diffsense.solve._steps import (
     PAPER_HFOV_STEPS_DEG,
@@ -52,6 +56,7 @@ __all__ = [
     "argmin_derivative",
     "basin_check",
     "box_solve",
+    "pareto_front",
     "pareto_sweep",
     "best_step",
     "bracket_around",

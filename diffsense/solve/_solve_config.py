@@ -43,7 +43,7 @@ class SolveConfig:
             configs/optimise/reserve_polish.toml`; docs, "The grid-search baseline").
 
     The defaults: three levels halving tau reach the best dense-grid basin of the rippled
-    test objective where tau = 1 alone does not (tests/test_solve.py) and, with the secant,
+    test objective where tau = 1 alone does not (tests/test_solve_lands.py) and, with the secant,
     fit the budget of 20 evaluations; 1e-3 of 150 deg is 0.15 deg, finer than the
     0.5-deg dense reference grid.
     """
