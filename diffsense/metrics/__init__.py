@@ -16,7 +16,7 @@ from diffsense.metrics._build import (
     speed_shifted_scenes,
     with_scenes,
 )
-from diffsense.metrics._build import _pad_vehicles as pad_vehicles
+from diffsense.metrics._build import pad_vehicles
 from diffsense.metrics._cost import (
     CostModel,
     CostTerm,

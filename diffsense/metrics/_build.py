@@ -53,7 +53,7 @@ def relevance_reach(spec: InputSpec, sensors: Sequence[Sensor]) -> dict[str, flo
                 sensor_reach_m=max(s.mount_x_m for s in sensors))
 
 
-def _pad_vehicles(scene: Scene, width: int) -> Scene:
+def pad_vehicles(scene: Scene, width: int) -> Scene:
     """Pad the vehicle axis [N, T, V] to `width` with absent vehicles: those `select_vehicles`
     adds (present False, role BACKGROUND, 1 km behind the ego), so padding means one thing."""
     extra = width - scene.num_vehicles
@@ -77,7 +77,7 @@ def _concat_scenes(scenes: Sequence[Scene], width: int) -> Scene:
 
 
 def _concat_padded(scenes: tuple[Scene, ...], width: int) -> Scene:
-    return jax.tree.map(lambda *a: jnp.concatenate(a), *[_pad_vehicles(s, width) for s in scenes])
+    return jax.tree.map(lambda *a: jnp.concatenate(a), *[pad_vehicles(s, width) for s in scenes])
 
 
 def simulate_scenes(

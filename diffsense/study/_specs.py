@@ -154,9 +154,8 @@ class SensingSpec:
         sensor_config: a TOML of sensor constants (any subset) replacing the profile's; for a
             suite, {member name: TOML} (e.g. {"radar": "radar_swerling1.toml"}), members not
             named keeping their profile's.
-        built: the sensor itself, built once from the four above (not an argument).
-        kind: its short name: "radar", "camera", a custom sensor's; "radar+camera" for a suite.
-        specs: {name: ParamSpec} of every free parameter: its unit, domain and default.
+        built: the sensor itself, built once from the four above (not an argument); `kind` and
+            `specs` read it.
     """
 
     sensor: str | Sensor | Sequence[str | Sensor] = "radar"
@@ -164,8 +163,6 @@ class SensingSpec:
     profile: str = "physical"
     sensor_config: str | Mapping[str, str] | None = None
     built: Sensor = dataclasses.field(init=False, repr=False, compare=False)
-    kind: str = dataclasses.field(init=False, repr=False, compare=False)
-    specs: dict[str, ParamSpec] = dataclasses.field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if isinstance(self.sensor, list):
@@ -174,9 +171,17 @@ class SensingSpec:
             built = _suite_with_configs(self.sensor, self.sensor_config, self.profile)
         else:
             built = make_sensor(self.sensor, self.sensor_config, self.profile)
-        params = resolve_params(built, self.params)
-        kind = "+".join(built.names) if hasattr(built, "members") else built.kind
-        _hold(self, built=built, params=params, kind=kind, specs={name: built.spec(name) for name in params})
+        _hold(self, built=built, params=resolve_params(built, self.params))
+
+    @property
+    def kind(self) -> str:
+        """The sensor's short name: "radar", "camera", a custom sensor's; "radar+camera" for a suite."""
+        return "+".join(self.built.names) if hasattr(self.built, "members") else self.built.kind
+
+    @property
+    def specs(self) -> dict[str, ParamSpec]:
+        """{name: ParamSpec} of every free parameter: its unit, domain and default."""
+        return {name: self.built.spec(name) for name in self.params}
 
     def member_names(self) -> str | list[str]:
         """The sensor as result.json's config names it: its kind, or a suite's member names."""
