@@ -43,7 +43,7 @@ def test_a_suite_file_gives_members_their_own_constants(tmp_path):
     (tmp_path / "laws" / "r.toml").write_text((ROOT / "configs/sensors/laws/radar_swerling1.toml").read_text())
     (tmp_path / "s.toml").write_text(GOOD + '[sensor_config]\nradar = "laws/r.toml"\n')
     radar, camera = ds.Problem.from_suite(tmp_path / "s.toml").sensing.built.members
-    assert radar.config.detection.law == "swerling1" and camera.config.detection.law == "threshold"
+    assert radar.config.detection.law == "swerling1" and camera.config == ds.sensors.Camera.from_toml().config
 
 
 @pytest.mark.parametrize("text, culprit", [

@@ -1,4 +1,5 @@
-"""The suite flags of `python -m diffsense.optimise`: --suite FILE and --pareto [LAMBDAS]."""
+"""The suite flags of `python -m diffsense.optimise`: --suite FILE (with --param NAME=LO:HI replacing
+its [params]) and --pareto [LAMBDAS]."""
 
 from __future__ import annotations
 
@@ -10,13 +11,17 @@ from diffsense.runtime import InputError
 
 
 def suite_fields(args: argparse.Namespace) -> dict | None:
-    """The fields of the suite file --suite names (None without one), refusing the flags it replaces."""
+    """The fields of the suite file --suite names (None without one), refusing the flags it replaces.
+    `--param NAME=LO:HI` (repeated) may replace the file's [params]: the same members with
+    other free parameters (named as the file names them: front_radar.hfov_deg)."""
     if args.suite is None:
         return None
-    given = [flag for flag, value in (("--sensor", args.sensor), ("--param", args.param),
+    single = bool(args.param) and len(args.param) == 1 and "=" not in args.param[0]
+    given = [flag for flag, value in (("--sensor", args.sensor), ("--param", single),
                                       ("--interval", args.interval), ("--steps", args.steps)) if value]
     if given:
-        raise InputError(f"--suite names the sensors and parameters: give no {given[0]} with it")
+        hint = " (--param NAME=LO:HI replaces the file's [params])" if given[0] == "--param" else ""
+        raise InputError(f"--suite names the sensors and parameters: give no {given[0]} with it{hint}")
     from diffsense.study import load_suite
 
     return load_suite(args.suite)

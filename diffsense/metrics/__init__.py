@@ -24,6 +24,7 @@ from diffsense.metrics._cost import (
     cost_breakdown,
     load_costs,
     make_cost,
+    member_costs,
 )
 from diffsense.metrics._coverage import COVERAGE_PARTS, coverage_parts
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
@@ -46,7 +47,7 @@ __all__ = [
     "COVERAGE_PARTS", "ESTIMATORS", "PAPER_SCENARIOS", "QUESTIONS", "CostModel", "CostTerm", "Estimator",
     "EstimatorConfig", "HardEvaluation", "Objective", "ObjectiveData", "ReferenceEvaluation", "SensorCost",
     "SpeedShiftedScenes", "breakdown", "cost_breakdown", "coverage_parts", "is_deterministic", "load_costs",
-    "make_cost", "make_objective", "pad_vehicles", "recorded_scenes", "reference_draw_margins", "relaxed_bernoulli",
+    "make_cost", "make_objective", "member_costs", "pad_vehicles", "recorded_scenes", "reference_draw_margins", "relaxed_bernoulli",
     "relevance_reach", "safe_sqrt", "simulate_scenes", "speed_shifted_scenes", "tracked_summary", "value_and_grad",
     "with_scenes",
 ]

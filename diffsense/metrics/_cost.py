@@ -2,9 +2,11 @@
 
     model = load_costs()                          # configs/costs.toml (or a user TOML)
     cost = make_cost(model, suite)                # cost(r) [currency], r named as the sensor names them
+    member_costs(model, suite, r)                 # {"front_radar": 85.0, "corner_left": 96.2, ...}
     J = E(r) + cost_weight * cost(r)              # the objective of a cost-aware problem
 
-cost = sum over sensors of base + sum of terms, each term either
+cost = sum over a suite's members of their kind's base + sum of terms (two radars cost two radars,
+each at its own parameters), each term either
     "power": coefficient * (value / reference) ^ exponent
     "db":    coefficient * 10 ^ (exponent * (value - reference) / 10)
 so a term equals its coefficient at its reference value. Both forms are smooth and positive,
@@ -150,4 +152,16 @@ def cost_breakdown(model: CostModel, sensor: Sensor, r: Mapping[str, Any]) -> di
         out[label + "base"] = float(entry.base)
         for term in entry.terms:
             out[label + term.param] = float(term(jnp.asarray(full[prefix + term.param])))
+    return out
+
+
+def member_costs(model: CostModel, sensor: Sensor, r: Mapping[str, Any]) -> dict[str, float]:
+    """cost(r) of each member of a suite [currency], by member name, in the suite's order
+    ({"front_radar": 85.0, "corner_left": 92.5}); a lone sensor's under its kind. They sum to
+    `make_cost(model, sensor)(r)`; parameters r leaves out are charged at their defaults."""
+    full = sensor.defaults() | dict(r)
+    out: dict[str, float] = {}
+    for prefix, member, entry in _checked(model, sensor):
+        name = prefix[:-1] if prefix else member.kind
+        out[name] = float(entry.base) + sum(float(t(jnp.asarray(full[prefix + t.param]))) for t in entry.terms)
     return out

@@ -48,7 +48,13 @@ from diffsense.sensors._laws import (
 )
 from diffsense.sensors._measure import measurement_noise
 from diffsense.sensors._member import VARIANCE_FLOOR_M2, Covariance
-from diffsense.sensors._mount import MOUNT_NAMES, Mount, relevance_stand_ins
+from diffsense.sensors._mount import (
+    MOUNT_DOMAINS,
+    MOUNT_NAMES,
+    Mount,
+    Mounting,
+    relevance_stand_ins,
+)
 from diffsense.sensors._names import resolve_name, resolve_params
 from diffsense.sensors._params import (
     SENSORS,
@@ -90,7 +96,8 @@ __all__ = [
     # sensors, the suite and the registry
     "Camera", "Radar", "Sensor", "Suite", "fuse_members", "make_sensor", "register", "sensor_names",
     # constants, parameters and their domains
-    "CameraConfig", "CameraParams", "CameraTemperatures", "MODES", "MOUNT_NAMES", "Mount", "ParamSpec",
+    "CameraConfig", "CameraParams", "CameraTemperatures", "MODES", "MOUNT_DOMAINS", "MOUNT_NAMES", "Mount", "Mounting",
+    "ParamSpec",
     "RadarConfig", "RadarParams", "RadarTemperatures", "SENSORS", "check_params", "load_config",
     "make_params", "param_specs", "relevance_stand_ins", "resolve_name", "resolve_params", "with_param",
     # what a sensor reports, and the measurement covariance fusion takes

@@ -22,7 +22,9 @@ below every detecting member's (in the positive semi-definite order). A draw of 
 views, `fuse_members` fuses them with the drawn 0/1 in place of each p. A suite of M members
 forms 2^M - 1 sets; M <= 6.
 
-Parameters are the members' under qualified names, "<member>.<parameter>" ("radar.hfov_deg").
+Parameters are the members' under qualified names, "<member>.<parameter>" ("radar.hfov_deg",
+"corner_left.yaw_deg"). A member's `Mounting` gives its mounting parameters their defaults and
+domain (its envelope, inside the global one of `_mount.py`): two radars of one kind sit apart.
 Noise: member i draws from the i-th key of `jax.random.split(key, M)` (or is given draws
 [M, 2, T, V]), so members' noises are independent, and a member's draws in a suite differ from
 the same sensor's alone with the same key.
@@ -46,6 +48,7 @@ from diffsense.sensors._datatypes import Detections
 from diffsense.sensors._gates import Mode
 from diffsense.sensors._measure import KeyOrNoise
 from diffsense.sensors._member import Covariance, member_view
+from diffsense.sensors._mount import MOUNT_NAMES, Mounting
 from diffsense.sensors._params import ParamSpec
 from diffsense.sensors._sensor import Sensor
 from diffsense.sensors._weather import CLEAR, Weather
@@ -115,43 +118,85 @@ def fuse_members(scene: Scene, views: Sequence[tuple[Detections, Covariance]],
     return det, cov
 
 
+def _member_names(members: tuple[Sensor, ...], names: Sequence[str] | None) -> tuple[str, ...]:
+    """The members' names: each one's kind by default; non-empty, without '.', each once."""
+    names = tuple(m.kind for m in members) if names is None else tuple(str(n) for n in names)
+    if len(names) != len(members):
+        raise InputError(f"{len(names)} names for {len(members)} sensors")
+    for n in names:
+        if not n or "." in n:
+            raise InputError(f"a suite member's name is non-empty and has no '.', got {n!r}")
+    if len(set(names)) != len(names):
+        twice = min(n for n in set(names) if names.count(n) > 1)
+        raise InputError(f"suite member named twice: {twice} (give names=...)")
+    return names
+
+
+def _check_mounting(name: str, member: Sensor, mounting: Mounting) -> None:
+    """Refuse a mounting the member has no parameter for, or a default outside its envelope."""
+    own = {s.name: s for s in member.param_specs()}
+    missing = sorted(mounting.names() - set(own))
+    if missing:
+        raise InputError(f"member {name}: its sensor has no mounting parameter {missing[0]}")
+    for m in MOUNT_NAMES:
+        if m not in own:
+            continue
+        lo, hi = mounting.domain(m)
+        value = mounting.default(m, own[m].default)
+        if not lo <= value <= hi:
+            raise InputError(f"member {name}: its {m} default {value:g} is outside its envelope [{lo:g}, {hi:g}] "
+                             f"{own[m].unit}")
+
+
+def _qualified(name: str, spec: ParamSpec, mounting: Mounting) -> ParamSpec:
+    """A member's parameter under its qualified name; a mounting one with the member's default
+    and envelope as its domain."""
+    spec = dataclasses.replace(spec, name=f"{name}.{spec.name}", doc=f"{name}: {spec.doc}")
+    base = spec.name.split(".", 1)[1]
+    if base not in MOUNT_NAMES or base not in mounting.names():
+        return spec
+    lo, hi = mounting.domain(base)
+    return dataclasses.replace(spec, lower=lo, upper=hi, lower_open=False, default=mounting.default(base, spec.default))
+
+
 class Suite(Sensor):
     """Sensors on one ego fused into one track per vehicle (module docstring for the rules).
 
     `members` are the sensors; `names` their prefixes in qualified parameter names (default:
-    each member's `kind`; give names when two members are of one kind).
+    each member's `kind`; give names when two members are of one kind); `mountings` each
+    member's mounting defaults and envelope (`Mounting`; default: the sensor's own defaults
+    and the global envelope), which become the defaults and domains of its mounting parameters.
     """
 
     members: tuple[Sensor, ...]
     names: tuple[str, ...] = eqx.field(static=True)
+    mountings: tuple[Mounting, ...] = eqx.field(static=True)
     kind: ClassVar[str] = "suite"
 
-    def __init__(self, members: Sequence[Sensor], names: Sequence[str] | None = None):
+    def __init__(self, members: Sequence[Sensor], names: Sequence[str] | None = None,
+                 mountings: Sequence[Mounting | None] | None = None):
         members = tuple(members)
         if not 1 <= len(members) <= MAX_MEMBERS:
             raise InputError(f"a suite has 1 to {MAX_MEMBERS} sensors, got {len(members)}")
         for m in members:
             if not isinstance(m, Sensor):
                 raise InputError(f"a suite's members are Sensors, got {type(m).__name__}")
-        names = tuple(m.kind for m in members) if names is None else tuple(str(n) for n in names)
-        if len(names) != len(members):
-            raise InputError(f"{len(names)} names for {len(members)} sensors")
-        for n in names:
-            if not n or "." in n:
-                raise InputError(f"a suite member's name is non-empty and has no '.', got {n!r}")
-        if len(set(names)) != len(names):
-            twice = sorted(n for n in set(names) if names.count(n) > 1)[0]
-            raise InputError(f"suite member named twice: {twice} (give names=...)")
-        self.members, self.names = members, names
+        self.members, self.names = members, _member_names(members, names)
+        mountings = (None,) * len(members) if mountings is None else tuple(mountings)
+        if len(mountings) != len(members):
+            raise InputError(f"{len(mountings)} mountings for {len(members)} sensors")
+        self.mountings = tuple(Mounting() if m is None else m for m in mountings)
+        for name, member, mounting in zip(self.names, self.members, self.mountings):
+            _check_mounting(name, member, mounting)
 
     def param_specs(self) -> tuple[ParamSpec, ...]:
-        return tuple(dataclasses.replace(s, name=f"{n}.{s.name}", doc=f"{n}: {s.doc}")
-                     for n, m in zip(self.names, self.members) for s in m.param_specs())
+        return tuple(_qualified(n, s, mounting) for n, m, mounting in zip(self.names, self.members, self.mountings)
+                     for s in m.param_specs())
 
     @property
     def mount_x_m(self) -> float:
         """The farthest-forward member's mounting [m] (what reaches farthest sets the scene's extent)."""
-        return max(m.mount_x_m for m in self.members)
+        return max(mounting.default("mount_x_m", m.mount_x_m) for m, mounting in zip(self.members, self.mountings))
 
     def _split(self, r: dict[str, Any]) -> list[dict[str, Any]]:
         return [{s.name: r[f"{n}.{s.name}"] for s in m.param_specs()} for n, m in zip(self.names, self.members)]

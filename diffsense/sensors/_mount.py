@@ -94,3 +94,73 @@ def relevance_stand_ins(params: Mapping[str, tuple[float, float]]) -> list[Reach
     """One stand-in at the upper bound of every free `mount_x_m` in `params`: a solve may move the
     sensor that far forward, and the scenes must keep what could hide a vehicle from there."""
     return [ReachStandIn(float(hi)) for name, (_, hi) in params.items() if name.rsplit(".", 1)[-1] == "mount_x_m"]
+
+
+def _mount_name(name: Any, what: str) -> str:
+    if name not in MOUNT_DOMAINS:
+        raise InputError(f"{what}: unknown mounting parameter {name!r} (known: {', '.join(MOUNT_NAMES)})")
+    return name
+
+
+def _in_global(name: str, value: Any, what: str) -> float:
+    """`value` as a float if it is a number inside the global envelope of `name`; InputError otherwise."""
+    unit, lo, hi, _, _ = MOUNT_DOMAINS[name]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise InputError(f"{what} {name} must be a finite number [{unit}], got {value!r}")
+    if not lo <= value <= hi:
+        raise InputError(f"{what} {name} = {value:g} is outside the mounting envelope [{lo:g}, {hi:g}] {unit}")
+    return float(value)
+
+
+def _bounds(name: str, bounds: Any, what: str) -> tuple[float, float]:
+    try:
+        lo, hi = bounds
+    except (TypeError, ValueError):
+        raise InputError(f"{what} envelope {name} must be two numbers [LO, HI], got {bounds!r}") from None
+    lo, hi = (_in_global(name, b, f"{what} envelope") for b in (lo, hi))
+    if not lo < hi:
+        raise InputError(f"{what} envelope {name} must have LO < HI, got {lo:g} {hi:g}")
+    return lo, hi
+
+
+@dataclasses.dataclass(frozen=True)
+class Mounting:
+    """A suite member's place on the ego: its mounting defaults and the envelope a solve may move
+    it in (two corner radars of one kind sit in different places; `Suite(mountings=...)`).
+
+    Attributes:
+        defaults: {name: value} replacing the sensor's own mounting defaults (names in
+            `MOUNT_NAMES`; deg or m), inside the global envelope `MOUNT_DOMAINS`.
+        envelope: {name: (lo, hi)}: the member's own domain of each named mounting parameter,
+            inside the global envelope; a parameter left out keeps the global one.
+    Both may be given as mappings; they are held as tuples in `MOUNT_NAMES` order (a Suite's
+    static field must be hashable). Whether each default lies in its envelope is checked by the
+    Suite, which knows the sensor's own defaults.
+    """
+
+    defaults: Any = ()
+    envelope: Any = ()
+
+    def __post_init__(self):
+        defaults = dict(self.defaults)  # a mapping, or the held ((name, value), ...)
+        envelope = (dict(self.envelope) if isinstance(self.envelope, Mapping)
+                    else {n: (lo, hi) for n, lo, hi in self.envelope})  # or the held ((name, lo, hi), ...)
+        for name in (*defaults, *envelope):
+            _mount_name(name, "mounting")
+        object.__setattr__(self, "defaults", tuple(
+            (n, _in_global(n, defaults[n], "mounting default")) for n in MOUNT_NAMES if n in defaults))
+        object.__setattr__(self, "envelope", tuple(
+            (n, *_bounds(n, envelope[n], "mounting")) for n in MOUNT_NAMES if n in envelope))
+
+    def default(self, name: str, fallback: float) -> float:
+        """The member's default of mounting parameter `name`, `fallback` (the sensor's) if not set."""
+        return next((v for n, v in self.defaults if n == name), fallback)
+
+    def domain(self, name: str) -> tuple[float, float]:
+        """The member's envelope (lo, hi) of mounting parameter `name` [deg or m]."""
+        _, lo, hi, _, _ = MOUNT_DOMAINS[name]
+        return next(((a, b) for n, a, b in self.envelope if n == name), (lo, hi))
+
+    def names(self) -> set[str]:
+        """The mounting parameters it sets a default or an envelope for."""
+        return {n for n, _ in self.defaults} | {n for n, _, _ in self.envelope}

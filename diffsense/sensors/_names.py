@@ -6,12 +6,14 @@ from collections.abc import Mapping
 from typing import Any
 
 from diffsense.runtime import InputError, finite_number
+from diffsense.sensors._mount import MOUNT_NAMES
 from diffsense.sensors._sensor import Sensor
 
 
 def resolve_name(sensor: Sensor, name: str) -> str:
     """A parameter's full name from a full ("hfov_deg"), short ("hfov") or qualified
-    ("radar.hfov_deg") one; InputError naming the known ones otherwise."""
+    ("radar.hfov_deg", "corner_left.hfov": by the suite member's name) one; InputError naming
+    the known ones otherwise."""
     specs = [s.name for s in sensor.param_specs()]
     if name in specs:
         return name
@@ -56,6 +58,8 @@ def resolve_params(sensor: Sensor, params: Mapping[str, Any]) -> dict[str, tuple
         spec = sensor.spec(name)
         for value in (lo, hi):
             if not spec.contains(value):
-                raise InputError(f"bounds {lo:g} {hi:g} are outside the domain of {name}: {spec.describe()}")
+                # A mounting parameter's domain is its envelope (a suite member's own, or the global one).
+                what = " (its mounting envelope)" if name.rsplit(".", 1)[-1] in MOUNT_NAMES else ""
+                raise InputError(f"bounds {lo:g} {hi:g} are outside the domain of {name}: {spec.describe()}{what}")
         out[name] = (lo, hi)
     return out

@@ -9,6 +9,8 @@ turns it into E(r); `diffsense.optimise(problem)` runs the main job on it.
     problem.sensing.params              # {"hfov_deg": (30.0, 180.0)}: names resolved once
     problem.replace(variants=4)         # a new problem; the sensor is not built again
     Problem.from_specs(sensing=SensingSpec(sensor="camera"), traffic=TrafficSpec(variants=2))
+    Problem(sensor={"front": "radar", "corner_left": {"kind": "radar", "yaw_deg": 45.0}},
+            params={"corner_left.yaw_deg": (30, 80)})   # named members (`SensingSpec.sensor`)
 
 `Problem.from_toml` reads the layout of `configs/optimise/default.toml`; a file may be partial,
 and the keys it leaves out keep the shipped defaults.
@@ -88,7 +90,7 @@ class Problem:
 
     def __init__(
         self,
-        sensor: str | Sensor | Sequence[str | Sensor] = "radar",
+        sensor: str | Sensor | Sequence[str | Sensor] | Mapping[str, Any] = "radar",
         params: Mapping[str, tuple[float, float]] | None = None,
         scenarios: Sequence[str] = PAPER_SCENARIOS,
         scenes: str | None = None,

@@ -25,6 +25,7 @@ from diffsense.predictors import COMPUTE_DTYPES, Predictor
 from diffsense.runtime import InputError, finite_number
 from diffsense.sensors import ParamSpec, Sensor, Suite, make_sensor, resolve_params
 from diffsense.solve import BoxConfig, SolveConfig
+from diffsense.study._members import Member, build_suite, is_named, named_members
 from diffsense.tracks import FILL_POLICIES
 
 WEATHER_DOMAINS = {"rain_mm_h": (0.0, 500.0), "fog_visibility_m": (1.0, math.inf)}
@@ -145,7 +146,10 @@ class SensingSpec:
     Attributes:
         sensor: a registered sensor name ("radar", "camera"), a `diffsense.sensors.Sensor`, or a
             sequence of them (held as a tuple): a suite, fused into one track per vehicle
-            (`diffsense.sensors.Suite`).
+            (`diffsense.sensors.Suite`), its members named by their kinds. Or a suite of named
+            members, {name: kind or {"kind", "sensor_config", "yaw_deg", "mount_x_m",
+            "mount_y_m", "envelope"}} (two of one kind allowed), held as a tuple of `Member`s
+            (which it also takes): `diffsense.study.named_members`.
         params: {name: (lo, hi)}: the free parameters and their bounds, in the units their names
             carry ("hfov_deg": degrees). Short names ("hfov") are resolved to the sensor's full
             ones, once, here; a suite's are qualified by the member ("radar.hfov_deg").
@@ -153,24 +157,28 @@ class SensingSpec:
             experimental design: see configs/sensors/paper/).
         sensor_config: a TOML of sensor constants (any subset) replacing the profile's; for a
             suite, {member name: TOML} (e.g. {"radar": "radar_swerling1.toml"}), members not
-            named keeping their profile's.
+            named keeping their profile's. Named members carry their own (None here).
         built: the sensor itself, built once from the four above (not an argument); `kind` and
             `specs` read it.
     """
 
-    sensor: str | Sensor | Sequence[str | Sensor] = "radar"
+    sensor: str | Sensor | Sequence[str | Sensor] | Mapping[str, Any] | Sequence[Member] = "radar"
     params: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=lambda: {"hfov_deg": (30.0, 180.0)})
     profile: str = "physical"
     sensor_config: str | Mapping[str, str] | None = None
     built: Sensor = dataclasses.field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        if isinstance(self.sensor, list):
-            _hold(self, sensor=tuple(self.sensor))
-        if isinstance(self.sensor_config, Mapping):
-            built = _suite_with_configs(self.sensor, self.sensor_config, self.profile)
+        if is_named(self.sensor):
+            _hold(self, sensor=named_members(self.sensor))
+            if self.sensor_config is not None:
+                raise InputError("a suite of named members gives each member its own sensor_config")
+            built = build_suite(self.sensor, self.profile)
         else:
-            built = make_sensor(self.sensor, self.sensor_config, self.profile)
+            if isinstance(self.sensor, list):
+                _hold(self, sensor=tuple(self.sensor))
+            built = (_suite_with_configs(self.sensor, self.sensor_config, self.profile)
+                     if isinstance(self.sensor_config, Mapping) else make_sensor(self.sensor, self.sensor_config, self.profile))
         _hold(self, built=built, params=resolve_params(built, self.params))
 
     @property
@@ -183,8 +191,15 @@ class SensingSpec:
         """{name: ParamSpec} of every free parameter: its unit, domain and default."""
         return {name: self.built.spec(name) for name in self.params}
 
-    def member_names(self) -> str | list[str]:
-        """The sensor as result.json's config names it: its kind, or a suite's member names."""
+    def has_named_members(self) -> bool:
+        """Whether the sensor is a suite of named members (`Member`s)."""
+        return is_named(self.sensor)
+
+    def member_names(self) -> str | list[str] | dict[str, dict[str, Any]]:
+        """The sensor as result.json's config names it: its kind, a suite's member names, or
+        named members in their mapping form ({name: {"kind", ...}})."""
+        if is_named(self.sensor):
+            return {m.name: m.as_plain() for m in self.sensor}
         if isinstance(self.sensor, tuple):
             return [s if isinstance(s, str) else s.kind for s in self.sensor]
         return self.kind
