@@ -21,7 +21,7 @@ from diffsense import config as cfg
 from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.predictors import CSLSTM_SPEC, InputSpec, PredictorInputs
 from diffsense.scene import Scene
-from diffsense.sensors import Detections, ParamSpec, Radar, Sensor
+from diffsense.sensors import Camera, Detections, ParamSpec, Radar, Sensor
 from diffsense.tracks import build_inputs, flatten_instants, prediction_frames
 from tests._synthetic import straight_scene
 
@@ -103,6 +103,9 @@ def toy_objective(n: int = 3, key=None, instants: int | None = None, **kwargs):
 LAWS = Path(__file__).resolve().parents[1] / "configs" / "sensors" / "laws"
 # The shipped radar with the Swerling-1 detection law: its detections are random events.
 SWERLING = Radar.from_toml(LAWS / "radar_swerling1.toml")
+# The radar and camera with the deterministic threshold law (the paper profile's): 0/1 detections.
+THRESHOLD_RADAR = Radar.from_toml(LAWS / "radar_threshold.toml")
+THRESHOLD_CAMERA = Camera.from_toml(LAWS / "camera_threshold.toml")
 H = "hfov_deg"
 
 

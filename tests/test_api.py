@@ -19,6 +19,7 @@ import pytest
 
 import diffsense as ds
 from diffsense.predictors import CSLSTM_SPEC, InputSpec, PredictorInputs
+from tests._laws import THRESHOLD
 from tests._toy_pipeline import ToySensor
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,7 +46,8 @@ def random_cslstm():
 def radar(random_cslstm):
     problem = ds.Problem(sensor="radar", params={"hfov_deg": (30.0, 180.0), "range_m": (30.0, 200.0)},
                          scenarios=["sc01"], variants=2, seed=0, predictor=random_cslstm,
-                         prediction_stride_frames=20, predictor_dtype="float64")  # float64 throughout for FD
+                         prediction_stride_frames=20, predictor_dtype="float64",  # float64 throughout for FD
+                         sensor_config=THRESHOLD["radar"])  # the threshold law's mean-field E: smooth
     return ds.objective(problem)
 
 

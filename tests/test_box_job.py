@@ -17,6 +17,7 @@ from diffsense.metrics import make_objective
 from diffsense.solve import BoxConfig
 from diffsense.study import ParetoFront, check_lambdas, domain_note
 from diffsense.tracks import prediction_frames
+from tests._laws import THRESHOLD
 from tests._toy_pipeline import (
     TOY_GAIN,
     ToyPredictor,
@@ -27,12 +28,14 @@ from tests.test_result_json import _box
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = {"radar.range_m": (30.0, 200.0), "camera.width_px": (640.0, 3840.0)}
-SWERLING = {"radar": "configs/sensors/laws/radar_swerling1.toml"}
+THRESHOLDS = dict(THRESHOLD)  # both members on the threshold law: answers on E_hard
+SWERLING = {"radar": "configs/sensors/laws/radar_swerling1.toml", "camera": THRESHOLD["camera"]}
 TINY = BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3)
 
 
 def _problem(**changes) -> ds.Problem:
-    return ds.Problem(**{"sensor": ["radar", "camera"], "params": PARAMS, "scenarios": ["sc01"]} | changes)
+    return ds.Problem(**{"sensor": ["radar", "camera"], "params": PARAMS, "scenarios": ["sc01"],
+                         "sensor_config": THRESHOLDS} | changes)
 
 
 def _toy_objective(problem, predictor=None):
@@ -114,7 +117,8 @@ def test_a_parameter_on_its_bound_is_noted(boxed):
 
 
 def test_a_cost_weight_makes_one_parameter_a_box_solve():
-    problem = ds.Problem(params={"range_m": (30.0, 200.0)}, cost_weight=0.5, box=TINY, scenarios=["sc01"])
+    problem = ds.Problem(params={"range_m": (30.0, 200.0)}, cost_weight=0.5, box=TINY, scenarios=["sc01"],
+                         sensor_config=THRESHOLD["radar"])
     result = ds.optimise(problem, E=_toy_objective(problem))
     assert result.solve is None and result.box.cost_weight == 0.5 and set(result.r_star) == {"range_m"}
 

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _laws import threshold_config
 from _sensor_scenes import (
     COVERED,
     ahead,
@@ -31,7 +32,7 @@ from diffsense.scene import CAR, TRUCK
 from diffsense.sensors._camera import _camera_terms
 from diffsense.sensors._geometry import Tracks
 
-CAMERA = sensors.load_config("camera")
+CAMERA = threshold_config("camera")  # the gates this file tests
 CONFIDENCE = cfg.replace(CAMERA, detection=sensors.CameraDetection(law="confidence"))
 hard_gates = jax.jit(lambda scene, params, config: _camera_terms(Tracks.of(scene), params, config, "hard", 1.0)[0],
                      static_argnums=2)

@@ -36,13 +36,14 @@ def test_each_flag_sets_its_field(tmp_path):
                      "--scenarios", "sc02,sc03", "--variants", "3", "--seed", "7", "--fill", "zero",
                      "--objective", "tracked", "--miss-penalty", "25", "--predictor-dtype", "float32",
                      "--traffic-speed-offset-kmh", "-10", "--dense-check", "0.5",
-                     "--rain-mm-h", "4", "--estimator", "mc", "--mc-samples", "5", "--cost-weight", "0.25")
+                     "--rain-mm-h", "4", "--estimator", "mc", "--mc-samples", "5", "--cost-weight", "0.25",
+                     "--draws", "12")
     assert p.keywords() == ds.Problem.from_toml().keywords() | {
         "sensor": "camera", "params": {"hfov_deg": (20.0, 90.0)}, "steps": (20.0, 45.0, 90.0),
         "scenarios": ("sc02", "sc03"), "variants": 3, "seed": 7, "fill": "zero", "objective": "tracked",
         "miss_penalty_m2": 25.0, "predictor_dtype": "float32", "traffic_speed_offset_kmh": -10.0, "dense_check": 0.5,
         "weather": {"rain_mm_h": 4.0, "fog_visibility_m": math.inf}, "cost_weight": 0.25,
-        "estimator": ds.metrics.EstimatorConfig(kind="mc", samples=5)}
+        "estimator": ds.metrics.EstimatorConfig(kind="mc", samples=5, reference_draws=12)}
     (fog,) = _problems("--fog-visibility-m", "150")
     assert fog.traffic.weather == {"rain_mm_h": 0.0, "fog_visibility_m": 150.0}
     (tmp_path / "x.csv").touch()
@@ -52,6 +53,10 @@ def test_each_flag_sets_its_field(tmp_path):
     laws = str(ROOT / "configs" / "sensors" / "laws" / "radar_swerling1.toml")
     (law,) = _problems("--sensor-config", laws)
     assert law.sensing.sensor_config == laws
+
+
+def test_a_reference_needs_two_draws_for_its_standard_error():
+    _refused("reference_draws must be >= 2", "--draws", "1")
 
 
 def test_the_temperature_rescales_the_whole_continuation():

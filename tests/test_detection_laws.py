@@ -268,10 +268,17 @@ def test_every_parameter_is_finite_at_both_ends_of_its_domain(case, dtype):
     assert np.any((np.asarray(hard) > 0) & (np.asarray(hard) < 1))  # the law's p, not a 0/1 gate
 
 
-def test_the_laws_ship_off_and_their_configs_switch_the_law_and_nothing_else():
-    for name in ("radar", "camera"):
-        for profile in ("physical", "paper"):
-            assert sensors.load_config(name, profile=profile).detection.law == "threshold"
+def test_the_physical_profile_ships_the_physical_laws_and_the_paper_profile_the_threshold():
+    for name, law in (("radar", "swerling1"), ("camera", "confidence")):
+        assert sensors.load_config(name).detection.law == law
+        assert sensors.load_config(name, profile="paper").detection.law == "threshold"
+    assert sensors.load_config("radar") == RADAR and sensors.load_config("camera") == CAMERA
+    # each law's config switches the law and nothing else, in either profile
     laws = Path(__file__).resolve().parents[1] / "configs" / "sensors" / "laws"
-    assert sensors.Radar.from_toml(laws / "radar_swerling1.toml").config == RADAR
-    assert sensors.Camera.from_toml(laws / "camera_confidence.toml").config == CAMERA
+    for profile in ("physical", "paper"):
+        for name, files in (("radar", ("radar_swerling1", "radar_threshold")), ("camera", ("camera_confidence", "camera_threshold"))):
+            base = sensors.load_config(name, profile=profile)
+            for file in files:
+                switched = sensors.load_config(name, laws / f"{file}.toml", profile)
+                assert cfg.replace(switched, detection=base.detection) == base
+                assert switched.detection.law == ("threshold" if "threshold" in file else sensors.load_config(name).detection.law)

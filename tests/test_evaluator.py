@@ -23,7 +23,13 @@ from diffsense.metrics import ReferenceEvaluation, make_objective
 from diffsense.sensors import Radar, load_config
 from diffsense.solve import BoxFunctions, Evaluator
 from diffsense.tracks import prediction_frames
-from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_objective, toy_scenes
+from tests._toy_pipeline import (
+    THRESHOLD_RADAR,
+    TOY_GAIN,
+    ToyPredictor,
+    toy_objective,
+    toy_scenes,
+)
 
 
 class _Hard(NamedTuple):
@@ -64,7 +70,7 @@ def _swerling_radar():
 class DeterministicBowl(Bowl):
     """The bowl with a threshold-law sensor: its reference is its hard evaluation."""
 
-    sensor: Radar = eqx.field(static=True, default_factory=Radar.from_toml)
+    sensor: Radar = eqx.field(static=True, default_factory=lambda: THRESHOLD_RADAR)
 
 
 class RandomLawBowl(Bowl):

@@ -5,6 +5,7 @@ sampled noise, qualified parameter names, custom members, and the refusals that 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -31,6 +32,7 @@ KEY = jax.random.key(7, impl="rbg")  # threefry compiles ~3 s slower on CPU
 RADAR, CAMERA = Radar.from_toml(), Camera.from_toml()
 SUITE = Suite((RADAR, CAMERA))
 FLOOR = sensors.VARIANCE_FLOOR_M2  # 1 mm^2 added to every variance
+LAWS = Path(__file__).resolve().parents[1] / "configs" / "sensors" / "laws"
 
 
 def scene(dtype=np.float64):
@@ -154,9 +156,11 @@ def test_soft_p_is_one_minus_the_product_of_misses_and_the_ego_and_padding_keep_
 
 
 def test_the_fused_covariance_is_below_each_detecting_members():
+    # Under the threshold law, whose hard detections are 0 or 1 (whichever law the profile defaults to).
+    suite = Suite(tuple(type(s).from_toml(LAWS / f"{s.kind}_threshold.toml") for s in (RADAR, CAMERA)))
     sc, r = scene(), {"radar.hfov_deg": 70.0, "camera.hfov_deg": 100.0}
-    _, cov = detect(SUITE, sc, r, KEY, "hard", 1.0)
-    members = views(SUITE, sc, r, KEY, "hard", 1.0)
+    _, cov = detect(suite, sc, r, KEY, "hard", 1.0)
+    members = views(suite, sc, r, KEY, "hard", 1.0)
     both = [(t, v) for t, v in np.argwhere(np.asarray(members[0][0].p_detect) * np.asarray(members[1][0].p_detect) > 0)
             if v != 0]
     assert len(both) >= 4

@@ -5,6 +5,7 @@ notes it ends with, the progress events, and which E the answer is judged on."""
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 import diffsense as ds
@@ -12,6 +13,7 @@ from diffsense.metrics import EstimatorConfig, make_objective
 from diffsense.solve import SolveConfig, default_steps
 from diffsense.study import domain_note, planned_evaluations, problem_config
 from diffsense.tracks import prediction_frames
+from tests._laws import THRESHOLD
 from tests._toy_pipeline import (
     TOY_GAIN,
     ToyPredictor,
@@ -55,7 +57,7 @@ def _toy_objective(problem, predictor):
 @pytest.fixture(scope="module")
 def solved():
     problem = ds.Problem(params={H: (20.0, 100.0)}, steps=(20.0, 60.0, 100.0), dense_check=40.0, extra_curve_points=4,
-                         solve=SolveConfig(max_evaluations=9), scenarios=["sc01"])
+                         solve=SolveConfig(max_evaluations=9), scenarios=["sc01"], sensor_config=THRESHOLD["radar"])
     E = _toy_objective(problem, ValidatedToyPredictor(jnp.asarray(TOY_GAIN)))
     lines, events = [], []
     result = ds.optimise(problem, E=E, progress=lines.append, on_evaluation=events.append, sensitivity=("rain_mm_h",))
@@ -141,11 +143,20 @@ def test_under_straight_through_the_sweep_reads_e_soft_off_e_ref_and_every_value
     assert result.solve.E_hard_star == min(e["E_m"] for e in events if e["kind"] == "reference")
 
 
-def test_with_figures_the_plan_counts_the_sweeps_value_and_gradients_which_the_figures_draw():
+def test_under_straight_through_the_figures_draw_the_slope_where_the_solve_evaluated_it():
+    # E_soft's value is E_ref: the figures read it off the sweep's E_ref, and draw dE/dr at the
+    # points the solve evaluated it, without a value-and-gradient program of their own
     problem, events = _swerling(), []
     result = ds.optimise(problem, E=radar_objective(kind="auto", draws=4), on_evaluation=events.append)
-    assert {e["planned"] for e in events} == {planned_evaluations(problem, sweep_soft=True)}
-    assert result.programs_run["figures"]["soft"] >= 3  # the sweep's steps, drawn with their slope
+    assert {e["planned"] for e in events} == {planned_evaluations(problem, sweep_soft=False)}
+    assert result.programs_run["figures"]["soft"] == 0
+    curves = result.curves
+    sweep = {p.r: p.E_hard for p in result.solve.sweep}  # E_ref at the steps
+    for r, e, slope in zip(curves.r, curves.E_soft, curves.dE_dr):
+        if r in sweep:
+            assert e == pytest.approx(sweep[r], rel=1e-12)
+        assert np.isfinite(slope) or r in sweep
+    assert np.isfinite(curves.dE_dr).any()  # the final level's gradient evaluations
 
 
 def test_under_straight_through_the_default_steps_are_swept():

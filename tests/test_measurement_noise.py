@@ -10,13 +10,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _laws import threshold_config
 from _sensor_scenes import ahead, jit_detect, jit_p_detect, make_scene, traffic_scene
 
 from diffsense import config as cfg
 from diffsense import sensors
 
-RADAR = sensors.load_config("radar")
-CAMERA = sensors.load_config("camera")
+RADAR = threshold_config("radar")
+CAMERA = threshold_config("camera")
 KEY = jax.random.key(11, impl="rbg")  # threefry compiles ~3 s slower on CPU
 DRAWS = 4000  # frames of one static geometry: one (range, azimuth) draw pair each
 

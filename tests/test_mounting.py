@@ -23,6 +23,13 @@ from diffsense.sensors import Camera, Radar, relevance_stand_ins
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY = jax.random.key(5, impl="rbg")
+LAWS = ROOT / "configs" / "sensors" / "laws"
+
+
+def threshold(cls):
+    """The sensor under the deterministic threshold law, whose hard detections are 0 or 1
+    (whichever law the profile defaults to)."""
+    return cls.from_toml(LAWS / f"{cls.kind}_threshold.toml")
 
 
 @pytest.mark.parametrize("make", [Radar.from_toml, Camera.from_toml])
@@ -41,14 +48,14 @@ def test_the_default_mounting_given_as_arrays_is_the_unmounted_sensor_bit_for_bi
 def test_the_sensors_sit_ahead_of_the_egos_centre():
     # A small object 3.5 m ahead of the ego's centre is behind the radar (4.2 m), ahead of the camera (2.5 m).
     scene = make_scene([[0.0, 3.5]], [[0.0, 0.0]], length_m=[4.5, 0.4], width_m=[1.8, 0.4])
-    for sensor, seen in ((Radar.from_toml(), 0.0), (Camera.from_toml(), 1.0)):
+    for sensor, seen in ((threshold(Radar), 0.0), (threshold(Camera), 1.0)):
         assert float(jit_p_detect(scene, sensor.config.params, sensor.config, mode="hard")[0, 1]) == seen
 
 
 def test_the_fov_gate_is_centred_on_the_yaw_in_degrees():
     # A car 30 m from the radar's mount point, 40 deg left of the ego's heading; HFOV 30 deg sees
     # +-15 deg about the boresight: yaw 0 misses it, 26 sees it (40 - 26 = 14), 24 misses it (16).
-    radar = Radar.from_toml()
+    radar = threshold(Radar)
     az = math.radians(40.0)
     scene = make_scene([[0.0, radar.mount_x_m + 30 * math.cos(az)]], [[0.0, 30 * math.sin(az)]])
     seen = [float(radar.detect(scene, {"hfov_deg": 30.0, "yaw_deg": yaw}, KEY, mode="hard").p_detect[0, 1])

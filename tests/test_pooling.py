@@ -17,10 +17,9 @@ import numpy as np
 import pytest
 
 from diffsense.metrics import make_objective, pad_vehicles
-from diffsense.sensors import Radar
 from diffsense.tracks import prediction_frames
 from tests._synthetic import straight_scene
-from tests._toy_pipeline import ToyPredictor
+from tests._toy_pipeline import THRESHOLD_RADAR, ToyPredictor
 
 R = "hfov_deg"
 FRAMES = prediction_frames(101, stride_frames=8)  # 3 instants per variant
@@ -41,7 +40,7 @@ def _stack(scenes):
 
 
 def _objective(scenes, scenario, draws, names):
-    obj = make_objective(scenes, np.asarray(scenario), FRAMES, Radar.from_toml(),
+    obj = make_objective(scenes, np.asarray(scenario), FRAMES, THRESHOLD_RADAR,
                          ToyPredictor(jnp.asarray(0.05)), names=(R,), shard=False, scenario_names=names)
     return eqx.tree_at(lambda o: o.data.noise_key, obj, draws)
 

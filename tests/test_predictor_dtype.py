@@ -26,6 +26,7 @@ from diffsense.predictors import (
     with_compute_dtype,
 )
 from diffsense.runtime import InputError
+from tests._laws import THRESHOLD
 
 
 def _inputs(dtype, b=6, m=3, seed=0):
@@ -112,8 +113,9 @@ def test_the_cast_is_one_level_deep_and_refuses_other_dtypes():
 def objectives():
     # The shipped weights: a random network predicts near-constant futures, and E would be flat.
     predictor = ds.predictors.load_predictor()
+    # The threshold law's mean-field E: smooth, so a finite difference checks its gradient.
     kw = dict(sensor="radar", params={"hfov_deg": (30.0, 180.0)}, scenarios=["sc03"], variants=2, seed=0,
-              predictor=predictor, prediction_stride_frames=20)
+              predictor=predictor, prediction_stride_frames=20, sensor_config=THRESHOLD["radar"])
     return ds.objective(ds.Problem(**kw)), ds.objective(ds.Problem(**kw, predictor_dtype="float64"))
 
 

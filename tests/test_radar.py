@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _laws import threshold_config
 from _sensor_scenes import (
     COVERED,
     ahead,
@@ -33,7 +34,7 @@ from diffsense.scene import CAR, TRUCK, VAN
 from diffsense.sensors._geometry import Tracks
 from diffsense.sensors._radar import _radar_terms
 
-RADAR = sensors.load_config("radar")
+RADAR = threshold_config("radar")  # the gates this file tests
 SWERLING = cfg.replace(RADAR, detection=sensors.RadarDetection(law="swerling1"))
 terms = jax.jit(lambda scene, params, config, mode="soft", weather=sensors.CLEAR:
                 _radar_terms(Tracks.of(scene), params, config, mode, 1.0, weather), static_argnums=(2, 3))

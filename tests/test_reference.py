@@ -59,7 +59,7 @@ def test_summary_of_the_draws_by_hand():
 
 
 def test_deterministic_law_reference_is_the_hard_objective():
-    obj = radar_objective(Radar.from_toml())
+    obj = radar_objective(toy.THRESHOLD_RADAR)
     ref = reference(obj, 12.0)
     assert ref.draws.shape == (1,) and float(ref.e_se) == 0.0
     assert float(ref.e) == float(hard(obj, 12.0))
@@ -68,11 +68,14 @@ def test_deterministic_law_reference_is_the_hard_objective():
 
 
 def test_which_sensors_are_drawn():
-    """The shipped radar and camera use the deterministic "threshold" law; a Swerling radar
-    makes its suite random; a custom sensor declares no law and is drawn."""
-    radar, camera = Radar.from_toml(), Camera.from_toml()
-    assert all(metrics.is_deterministic(s) for s in (radar, camera, Suite((radar, camera))))
-    assert not any(metrics.is_deterministic(s) for s in (SWERLING, Suite((SWERLING, camera)), toy.ToySensor()))
+    """The physical profile's radar and camera detect by probabilistic laws and are drawn; the
+    paper profile's, and the threshold law's, are deterministic (and a suite of them), a suite
+    with one random member is random, and a custom sensor declares no law and is drawn."""
+    radar, camera = toy.THRESHOLD_RADAR, toy.THRESHOLD_CAMERA
+    paper = (Radar.from_toml(None, "paper"), Camera.from_toml(None, "paper"))
+    assert all(metrics.is_deterministic(s) for s in (radar, camera, Suite((radar, camera)), *paper))
+    shipped = (Radar.from_toml(), Camera.from_toml())
+    assert not any(metrics.is_deterministic(s) for s in (*shipped, SWERLING, Suite((SWERLING, camera)), toy.ToySensor()))
 
 
 def test_same_seed_same_reference_bit_for_bit(swerling):

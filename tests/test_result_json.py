@@ -18,7 +18,7 @@ from diffsense.solve import BoxResult, SolveResult, SweepPoint
 from diffsense.study import Result
 
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference",
-               "sweep", "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
+               "judged", "sweep", "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
                "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain",
                "sensitivity", "scenarios", "config", "versions")
 PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")  # beside python and diffsense
@@ -81,8 +81,11 @@ def test_versions_name_python_each_package_and_diffsense(monkeypatch):
 def test_one_parameter_result_json_key_by_key():
     out = _result(breakdown=BREAKDOWN, tracked={"E_tracked": 3.0}, near_optimal={"tolerance_m": 0.02},
                   flags=("flat",), domain={"outside": []}, sensitivity={"rain_mm_h": {"hfov_deg": 0.1}},
-                  reference={"answer_on": "E_hard"}).to_json()
+                  reference={"answer_on": "E_hard"}, judged={"E_ref": 4.3, "E_ref_se": 0.1, "seed": 9, "variants": 2}
+                  ).to_json()
     assert tuple(out) == RESULT_KEYS
+    assert out["judged"] == {"E_ref": 4.3, "E_ref_se": 0.1, "seed": 9, "variants": 2}
+    assert _result().to_json()["judged"] is None
     assert out["sensor"] == "radar" and out["params"] == {"hfov_deg": [30.0, 180.0]} and out["units"] == {"hfov_deg": "deg"}
     assert out["param"] == "hfov_deg" and out["interval"] == [30.0, 180.0] and out["r_star"] == {"hfov_deg": 42.0}
     assert (out["E_soft_star"], out["E_hard_star"]) == (4.2, 4.1) and out["reference"] == {"answer_on": "E_hard"}
@@ -126,8 +129,10 @@ def _box_result(**changes) -> Result:
 def test_box_result_json_key_by_key():
     out = _box_result(breakdown=BREAKDOWN, tracked={"E_tracked": 3.0}, domain={"outside": []},
                       sensitivity={"rain_mm_h": {}}, reference=None, config={"objective": "tracked"},
-                      dense_check={"step": 1.0}).to_json()
+                      dense_check={"step": 1.0}, judged={"E_ref": 5.5, "E_ref_se": 0.2, "seed": 4, "variants": 1}
+                      ).to_json()
     assert tuple(out) == (*RESULT_KEYS, "box")
+    assert out["judged"] == {"E_ref": 5.5, "E_ref_se": 0.2, "seed": 4, "variants": 1}
     assert _box_result(box=_box(on_bound={"hfov_deg": "", "range_m": ""})).to_json()["on_bound"] is False
     assert out["params"] == {"hfov_deg": [30.0, 60.0], "range_m": [40.0, 90.0]} and out["units"]["range_m"] == "m"
     assert out["param"] is None and out["interval"] is None and out["sweep"] == [] and out["bracket"] is None

@@ -16,12 +16,13 @@ from _sensor_scenes import ahead, jit_detect, jit_p_detect, make_scene, traffic_
 from diffsense import config as cfg
 from diffsense import sensors
 from diffsense.runtime import InputError
+from tests._laws import THRESHOLD, threshold_config
 from tests._synthetic import straight_scene
 from tests._toy_pipeline import ToySensor
 
 KEY = jax.random.key(11, impl="rbg")  # threefry compiles ~3 s slower on CPU
-RADAR = sensors.load_config("radar")
-CAMERA = sensors.load_config("camera")
+RADAR = threshold_config("radar")  # the gates: soft between 0 and 1, hard 0/1
+CAMERA = threshold_config("camera")
 STATIC = ("config", "mode")
 
 
@@ -156,9 +157,10 @@ def test_the_registry_names_and_builds_sensors():
 
 def test_make_sensor_builds_the_profile_asked_for_and_a_list_is_a_suite():
     camera = sensors.make_sensor(["camera"])  # one name: that sensor, not a suite
-    assert isinstance(camera, sensors.Camera) and camera.config == CAMERA
+    assert isinstance(camera, sensors.Camera) and camera.config == sensors.load_config("camera")
     paper = sensors.make_sensor(("radar",), profile="paper")
     assert isinstance(paper, sensors.Radar) and paper.config == sensors.load_config("radar", profile="paper") != RADAR
+    assert sensors.make_sensor("radar", THRESHOLD["radar"]).config == RADAR
     suite = sensors.make_sensor(["radar", "camera"], profile="paper")
     assert [m.config for m in suite.members] == [sensors.load_config(n, profile="paper") for n in ("radar", "camera")]
     radar = sensors.Radar.from_toml()

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pytest
+from _laws import THRESHOLD
 
 from diffsense.cli import run
 from diffsense.cli.sensors import main
@@ -19,7 +20,7 @@ def _json(capsys, *argv):
 
 
 def test_radar_report_on_boresight(capsys):
-    out = _json(capsys, "--sensor", "radar", "--hfov", "30,60", "--at-range", "100")
+    out = _json(capsys, "--sensor", "radar", "--hfov", "30,60", "--at-range", "100", "--config", THRESHOLD["radar"])
     narrow, wide = out["results"]
     assert narrow["snr_db"] == pytest.approx(16.78, abs=0.01)
     assert narrow["snr_db"] - wide["snr_db"] == pytest.approx(6.0206, abs=1e-3)
@@ -27,6 +28,19 @@ def test_radar_report_on_boresight(capsys):
     assert wide["effective_range_m"] == pytest.approx(wide["snr_range_m"])
     assert wide["effective_range_m"] < 100.0
     assert narrow["p_detect_hard"] == 1.0 and wide["p_detect_hard"] == 0.0
+
+
+def test_under_swerling_i_the_report_gives_the_ranges_of_pd_0_5_and_0_9(capsys):
+    out = _json(capsys, "--sensor", "radar", "--hfov", "30,60", "--at-range", "100")  # the physical law
+    narrow, wide = out["results"]
+    # Pd = Pfa^(1/(1+SNR)) at Pfa 1e-6: 12.77 dB for Pd 0.5, 21.14 dB for 0.9; the SNR falls as
+    # 40 log10 R (and 0.8 dB/km of air), so the ranges stand 10^(8.37/40) = 1.62 apart
+    assert narrow["snr_pd50_db"] == pytest.approx(12.771, abs=1e-3)
+    assert narrow["range_pd50_m"] / narrow["range_pd90_m"] == pytest.approx(1.619, rel=3e-3)
+    assert narrow["range_pd50_m"] / wide["range_pd50_m"] == pytest.approx(2**0.5, rel=1e-2)  # 6 dB less gain
+    assert wide["effective_range_m"] == pytest.approx(wide["range_pd50_m"])
+    assert wide["effective_range_m"] < 100.0 == narrow["effective_range_m"]
+    assert 0.0 < wide["p_detect_hard"] < narrow["p_detect_hard"] < 1.0  # a probability, not a gate
 
 
 def test_camera_report_and_table(capsys):

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _laws import threshold_config
 from _sensor_scenes import jit_p_detect, make_scene
 
 from diffsense import sensors
@@ -161,7 +162,7 @@ def test_occlusion_is_seen_from_the_mount_point():
     #   from (2.5, 0):    occluder 9.560 +- 7.458 deg = [2.102, 17.018], target [2.935, 6.213]: covered whole;
     #   from (2.5, -0.9): occluder [6.387, 23.100], target [4.224, 7.651]: covered 1.264 of 3.427 deg = 0.36879,
     #                     detected (>= 0.6 visible).
-    camera = sensors.Camera.from_toml()
+    camera = sensors.Camera(threshold_config("camera"))
     scene = make_scene([[0.0, 40.0, 12.0]], [[0.0, 3.0, 1.6]])
     tracks = geo.Tracks.of(scene)
     for y_m, hidden, seen in [(0.0, 1.0, 0.0), (-0.9, 0.36879, 1.0)]:
@@ -177,7 +178,7 @@ def test_occlusion_is_seen_from_the_mount_point():
 def test_hard_mode_compares_ranges_hard(name):
     # An occluder only 0.5 m nearer than the car it covers by 45 %: hard "nearer" is 1 (the camera
     # misses the car), where a soft comparison (sigmoid(0.5 / 1 m) = 0.62) would count 28 %.
-    config = sensors.load_config(name)
+    config = threshold_config(name)
     s0 = config.mount_x_m + 30.0
     scene = make_scene([[0.0, s0 - 0.5, s0]], [[0.0, 1.8 * 0.55, 0.0]])
     params = sensors.make_params(config, hfov_deg=60.0)
@@ -218,8 +219,8 @@ def test_the_gate_product_soft_and_hard_and_the_ramps():
 # within a few temperatures of an edge (a gate's, or an occlusion comparison's).
 EDGE = 8.0  # a gate at 8 tau is within sigmoid(-8) = 3.4e-4 of its indicator
 SOFT_HARD = {
-    "radar": (_radar_terms, sensors.make_params(sensors.load_config("radar"), hfov_deg=60.0)),
-    "camera": (_camera_terms, sensors.make_params(sensors.load_config("camera"), hfov_deg=150.0)),
+    "radar": (_radar_terms, sensors.make_params(threshold_config("radar"), hfov_deg=60.0)),
+    "camera": (_camera_terms, sensors.make_params(threshold_config("camera"), hfov_deg=150.0)),
 }
 
 
@@ -254,7 +255,7 @@ def occlusion_edge_distance(scene, config):
 @functools.partial(jax.jit, static_argnames=("name",))
 def soft_hard_and_edge(scene, params, temperature, *, name):
     terms, _ = SOFT_HARD[name]
-    config = sensors.load_config(name)
+    config = threshold_config(name)
     soft = sensors.p_detect(scene, params, config, mode="soft", temperature=temperature)
     hard = sensors.p_detect(scene, params, config, mode="hard")
     edge = jnp.min(jnp.stack([jnp.abs(m).T / (t * temperature)

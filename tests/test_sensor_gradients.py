@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _laws import threshold_config
 from _sensor_scenes import make_scene
 
 from diffsense import sensors as sensor
@@ -52,7 +53,7 @@ value = jax.jit(objective, static_argnames="config")
 
 @pytest.mark.parametrize("name", ["radar", "camera"])
 def test_gradient_matches_central_differences_for_every_parameter(name):
-    config = sensor.load_config(name)
+    config = threshold_config(name)
     params = sensor.make_params(config, **POINTS[name])
     scene = gradient_scene()
     temperature = 2.0  # wide enough that every parameter's gates are live
@@ -122,7 +123,7 @@ def at_extremes(params, temps, scene, config):
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("name", ["radar", "camera"])
 def test_values_and_gradients_are_finite_at_the_extremes(name, dtype):
-    config = sensor.load_config(name)
+    config = threshold_config(name)
     raw, temps = extreme_settings(name)
     params = type(config.params)(**{k: jnp.asarray(v, dtype) for k, v in raw.items()})
     soft, empty, hard = at_extremes(params, jnp.asarray(temps, dtype), extreme_scene(dtype),

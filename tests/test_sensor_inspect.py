@@ -11,6 +11,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _laws import threshold_config
 
 from diffsense.scene import CAR, EGO, TARGET, TRUCK
 from diffsense.sensors import (
@@ -23,7 +24,7 @@ from diffsense.sensors import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-RADAR, CAMERA = load_config("radar"), load_config("camera")
+RADAR, CAMERA = threshold_config("radar"), threshold_config("camera")
 # At HFOV 180 deg the lens gives k = 1280 px / pi rad = 407.4 px/rad: a 1.8 m wide car spans the
 # 10 px out to 0.9 m / tan(5 px / k) = 73.33 m from the camera.
 WIDE_CAMERA = make_params(CAMERA, hfov_deg=180.0)

@@ -7,6 +7,8 @@ mathematics, not what a trained network makes of the tracks.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import jax
 import numpy as np
 import pytest
@@ -17,7 +19,9 @@ from diffsense.solve import BoxConfig, BoxFunctions, Evaluator, box_solve
 from diffsense.tracks import prediction_frames
 from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
 
-SUITE = Suite((Radar.from_toml(), Camera.from_toml()))
+LAWS = Path(__file__).resolve().parents[1] / "configs" / "sensors" / "laws"
+# The threshold law (whichever the profile defaults to): the numbers below were measured under it.
+SUITE = Suite((Radar.from_toml(LAWS / "radar_threshold.toml"), Camera.from_toml(LAWS / "camera_threshold.toml")))
 LAMBDA = 0.01  # [m per EUR]
 
 

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _laws import threshold_config
 from _sensor_scenes import ahead
 
 from diffsense import sensors
@@ -219,7 +220,7 @@ def test_camera_gradients_match_finite_differences(vis, rain):
 def test_every_sensor_function_passes_the_weather_on(name):
     # Radar at 60 deg: a car at 87 m sits on the SNR edge (p ~ 1/2); 25 mm/h of rain takes ~2 dB off it.
     # Camera: a car at 60 m is seen in clear weather and lost in 50 m fog (hard).
-    config = sensors.load_config(name)
+    config = threshold_config(name)
     params = sensors.make_params(config, hfov_deg=60.0)
     scene = ahead(config, [87.0 if name == "radar" else 60.0])
     weather = sensors.Weather(rain_mm_h=25.0) if name == "radar" else sensors.Weather(fog_visibility_m=50.0)

@@ -14,6 +14,7 @@ import pytest
 import diffsense as ds
 from diffsense import sensors
 from diffsense.sensors import Weather
+from tests._laws import threshold_config
 from tests._synthetic import straight_scene
 
 
@@ -23,7 +24,7 @@ def _car_at(range_m: float, mount_x_m: float):
 
 
 def test_rain_shortens_the_radar():
-    config = sensors.load_config("radar")
+    config = threshold_config("radar")  # the threshold law: a car in or out
     params = sensors.make_params(config, hfov_deg=30.0, range_m=200.0)
     # At 115 m a car's SNR is ~14.3 dB, ~1.1 dB above the 13.2 dB threshold (the link budget in
     # configs/sensors/radar.toml: 122.7 m SNR-limited range). 25 mm/h costs 2 x 11.41 dB/km x
@@ -38,7 +39,7 @@ def test_rain_shortens_the_radar():
 
 
 def test_fog_shortens_the_camera():
-    config = sensors.load_config("camera")
+    config = threshold_config("camera")
     params = sensors.make_params(config, hfov_deg=60.0)
     fog = Weather(fog_visibility_m=50.0)  # Koschmieder: contrast range = visibility for C0 = 1
     for r, seen in ((40.0, 1.0), (60.0, 0.0)):

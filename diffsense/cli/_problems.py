@@ -41,6 +41,20 @@ def _number_list(text: str, what: str) -> tuple[float, ...]:
     return values
 
 
+def _sensors(text: str) -> list:
+    """The sensor of each problem --sensor asks for: "both" is two, "radar,camera" one suite."""
+    if text == "both":
+        return ["radar", "camera"]
+    if "," in text:
+        return [tuple(s.strip() for s in text.split(",") if s.strip())]
+    return [text]
+
+
+def _suite_sensor(sensor: list | dict) -> tuple | dict:
+    """A suite file's sensor: its kinds as a suite (a tuple), or its named members (a mapping)."""
+    return tuple(sensor) if isinstance(sensor, list) else sensor
+
+
 def problems(args: argparse.Namespace) -> list:
     """The `diffsense.Problem` of each sensor the flags ask for, every input checked."""
     from diffsense.solve import check_steps
@@ -54,20 +68,14 @@ def problems(args: argparse.Namespace) -> list:
 
     settings = load_settings(args.config)
     suite = suite_fields(args)
-    text = ",".join(suite["sensor"]) if suite else args.sensor or settings.problem.sensor
-    if text == "both":
-        sensors = ["radar", "camera"]
-    elif "," in text:
-        sensors = [tuple(s.strip() for s in text.split(",") if s.strip())]
-    else:
-        sensors = [text]
-    boxes = suite["params"] if suite else _param_boxes(args.param)
+    sensors = [_suite_sensor(suite["sensor"])] if suite else _sensors(args.sensor or settings.problem.sensor)
+    boxes = _param_boxes(args.param) or (suite["params"] if suite else {})
     if boxes and args.interval:
         raise InputError("--param NAME=LO:HI carries its bounds: give no --interval with it")
     single = None if boxes or not args.param else args.param[0]
     out = []
     for sensor in sensors:
-        if boxes or isinstance(sensor, tuple):
+        if boxes or not isinstance(sensor, str):
             if not boxes:
                 raise InputError("a suite needs its parameters as --param NAME=LO:HI (e.g. radar.hfov_deg=20:120)")
             fields = dict(sensor=sensor, params=boxes, **shared_fields(settings))  # the config's param is not theirs
@@ -111,6 +119,8 @@ def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict
         estimator["kind"] = args.estimator
     if args.mc_samples is not None:
         estimator["samples"] = args.mc_samples
+    if args.draws is not None:
+        estimator["reference_draws"] = args.draws
     fields["estimator"] = EstimatorConfig(**estimator)
     if args.tau is not None:
         if not (math.isfinite(args.tau) and args.tau > 0):

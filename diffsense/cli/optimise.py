@@ -75,6 +75,9 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
                         "for one parameter, relaxed-reference for several; mean-field under the threshold law; "
                         "docs: detection)")
     p.add_argument("--mc-samples", type=int, help="Monte-Carlo samples K (--estimator mc)")
+    p.add_argument("--draws", type=int, metavar="K",
+                   help="detection draws K of the reference E_ref a probabilistic law is answered on "
+                        "(default 32; each costs a predictor pass per evaluation; docs: detection)")
     p.add_argument("--objective", choices=("eq12", "tracked"),
                    help="eq12: the paper's E over every instant; tracked: the error where the target has a "
                    "track plus --miss-penalty per missed share")

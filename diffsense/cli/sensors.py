@@ -89,6 +89,9 @@ def _check_probe(args) -> None:
 
 def _table(sensor: str, rows: list[dict]) -> str:
     cols = _COLUMNS[sensor]
+    if rows and "range_pd50_m" in rows[0]:  # Swerling I: where Pd is 0.5 and 0.9, not one threshold
+        cols = tuple(c for c in cols if c != "snr_range_m")
+        cols = cols[:3] + ("range_pd90_m", "range_pd50_m") + cols[3:]
     lines = ["  ".join(f"{c:>18}" for c in cols)]
     lines += ["  ".join(f"{row[c]:>18.4g}" for c in cols) for row in rows]
     return "\n".join(lines)

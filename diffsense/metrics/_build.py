@@ -121,8 +121,11 @@ class SpeedShiftedScenes(eqx.Module):
 def speed_shifted_scenes(
     scenarios: Sequence[str], variants: int, key: jax.Array, *, spec: InputSpec, sensors: Sequence[Sensor],
     stride_frames: int = 4, background_vehicles: int = 0, dtype=jnp.float64, speed_offset_kmh: float = 0.0,
+    min_vehicles: int = 0,
 ) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
-    """`simulate_scenes`'s results with the scenes as a `SpeedShiftedScenes` (its `base` the batch)."""
+    """`simulate_scenes`'s results with the scenes as a `SpeedShiftedScenes` (its `base` the batch).
+    `min_vehicles` pads the vehicle axis to at least that width (absent vehicles): another seed's
+    batch padded to an objective's width runs that objective's compiled programs."""
     configs = tuple(_scenario(name, background_vehicles) for name in scenarios)
     keys = call(_scenario_keys, key, len(configs))
     scenes, selections = [], []
@@ -134,7 +137,7 @@ def speed_shifted_scenes(
     lengths = {s.num_frames for s in scenes}
     if len(lengths) != 1:
         raise InputError(f"scenarios must have the same duration to be pooled, got {sorted(lengths)} frames")
-    width = max(s.num_vehicles for s in scenes)
+    width = max(min_vehicles, *(s.num_vehicles for s in scenes))
     weather = Weather(rain_mm_h=np.repeat([c.weather.rain_mm_h for c in configs], variants),
                       fog_visibility_m=np.repeat([c.weather.fog_visibility_m or np.inf for c in configs], variants))
     shifted = SpeedShiftedScenes(_concat_scenes(scenes, width), keys, tuple(selections), configs, variants,

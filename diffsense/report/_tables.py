@@ -77,6 +77,7 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
         lines.append(f"E_ref(r*) = {ref['E_ref_star']:.4f} +- {ref['E_ref_star_se']:.4f} m (standard error; "
                      f"{ref['draws']} detection draws; estimator {ref['estimator']}); "
                      f"E_hard(r*) = {result['E_hard_star']:.4f} m with each detection at its median")
+    lines += judged_lines(result)
     lines += [f"note: {n}" for n in result.get("notes", [])]
     held = " (r* is on a bound, held there for small changes)" if result.get("on_bound") else ""
     for theta, d in (result.get("sensitivity") or {}).items():
@@ -145,6 +146,15 @@ def breakdown_table(result: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def judged_lines(result: Mapping[str, Any]) -> list[str]:
+    """The answer judged on data it was not chosen on (result.json's "judged"), as one line."""
+    j = result.get("judged")
+    if not j:
+        return []
+    return [(f"judged on fresh data (seed {j['seed']}: other scene variants, noise and detection draws, "
+             f"{j['variants']} variants per scenario): E_ref(r*) = {_cell(j['E_ref'])} +- {_cell(j['E_ref_se'])} m")]
+
+
 def _on_ref(result: Mapping[str, Any]) -> bool:
     return (result.get("reference") or {}).get("answer_on") == "E_ref"
 
@@ -165,5 +175,8 @@ def box_table(result: Mapping[str, Any]) -> str:
         lines.append(f"J is judged on E_ref: E_ref(r*) {_cell(ref['E_ref_star'])} +- {_cell(ref['E_ref_star_se'])} m "
                      f"(standard error; {ref['draws']} detection draws; estimator {ref['estimator']}); "
                      f"E_hard(r*) has each detection at its median")
+    if box.get("cost_by_member"):
+        lines.append("cost by member: " + ", ".join(f"{n} {_cell(c)}" for n, c in box["cost_by_member"].items()))
+    lines += judged_lines(result)
     lines += [f"note: {n}" for n in result.get("notes", [])]
     return "\n".join(lines)

@@ -39,15 +39,24 @@ def probe_scene(x_m, y_m, *, kind: int = CAR, length_m: float, width_m: float) -
     )
 
 
+def swerling1_snr_db(pd: float, pfa: float) -> float:
+    """The SNR [dB] at which a Swerling I target is detected with probability `pd` at false-alarm
+    probability `pfa`: Pd = Pfa^(1 / (1 + SNR)) solved for SNR."""
+    return 10.0 * math.log10(math.log(pfa) / math.log(pd) - 1.0)
+
+
 @functools.partial(jax.jit, static_argnames="config")
-def radar_snr_range_m(params, config: RadarConfig, rcs_dbsm) -> Float[Array, ""]:
-    """Range [m] at which the boresight SNR of a target equals the threshold.
+def radar_snr_range_m(params, config: RadarConfig, rcs_dbsm, threshold_db=None) -> Float[Array, ""]:
+    """Range [m] at which the boresight SNR of a target equals `threshold_db` (default: the
+    threshold law's `snr_threshold_db`).
 
     Bisection in log range over [1 mm, 10^4 km] (SNR falls monotonically with range); 0 or inf
     when the threshold is crossed outside that bracket.
     """
+    threshold_db = config.snr_threshold_db if threshold_db is None else threshold_db
+
     def margin(log_r):
-        return radar_snr_db(jnp.exp(log_r), rcs_dbsm, params, config) - config.snr_threshold_db
+        return radar_snr_db(jnp.exp(log_r), rcs_dbsm, params, config) - threshold_db
 
     def halve(_, bracket):
         lo, hi = bracket
@@ -80,6 +89,11 @@ def boresight_report(
             "snr_range_m": snr_range,
             "effective_range_m": min(snr_range, float(params.range_m)),
         }
+        if config.detection.law == "swerling1":  # where detection is as likely as not, and likely
+            pfa = config.detection.pfa
+            pd50, pd90 = (float(radar_snr_range_m(params, config, rcs, swerling1_snr_db(pd, pfa))) for pd in (0.5, 0.9))
+            report |= {"snr_pd50_db": swerling1_snr_db(0.5, pfa), "range_pd50_m": pd50, "range_pd90_m": pd90,
+                       "effective_range_m": min(pd50, float(params.range_m))}
     else:
         k = float(camera_px_per_rad(params))
         # Where the probe's width shrinks to min_width_px: 2 atan(w / 2R) k = min_width_px.

@@ -1,14 +1,14 @@
-"""Detection as a physical probability: the laws that replace the threshold gates when chosen.
+"""Detection as a physical probability: the physical profile's laws, and the threshold gates they replace.
 
 A sensor's `[detection] law` (its TOML) picks how a detection happens:
 
-- "threshold" (the shipped default of both profiles): deterministic thresholds (FOV, range,
-  SNR or visible fraction), relaxed by logistic gates in soft mode (`_gates.py`).
-- radar "swerling1": a Swerling I target (exponentially distributed echo power, one look)
+- "threshold" (the paper profile's): deterministic thresholds (FOV, range, SNR or visible
+  fraction), relaxed by logistic gates in soft mode (`_gates.py`).
+- radar "swerling1" (the physical profile's): a Swerling I target (exponentially distributed echo power, one look)
   in complex Gaussian noise, square-law detected against the threshold that gives the
   false-alarm probability Pfa: Pd = Pfa^(1 / (1 + SNR)), SNR linear. The azimuth edge is the
   antenna pattern (`gaussian_beam_loss_db`), and the range cut is made on the measured range.
-- camera "confidence": the detector's confidence has a mean that grows with the object's width
+- camera "confidence" (the physical profile's): the detector's confidence has a mean that grows with the object's width
   in pixels and its visible fraction (`confidence_mean`), plus frame-to-frame Gaussian noise;
   a detection is confidence >= the threshold (the paper's 0.6), so
   p = Phi((mean - threshold) / sigma).
@@ -54,7 +54,7 @@ class RadarDetection:
         pfa: false-alarm probability per cell and look of the "swerling1" law [-].
     """
 
-    law: RadarLaw = "threshold"
+    law: RadarLaw = "swerling1"
     pfa: float = 1e-6
 
     def __post_init__(self):
@@ -74,7 +74,7 @@ class CameraDetection:
         threshold: a detection is confidence >= this [-].
     """
 
-    law: CameraLaw = "threshold"
+    law: CameraLaw = "confidence"
     confidence_max: float = 0.95
     width50_px: float = 10.0
     width_scale_px: float = 2.0

@@ -130,6 +130,10 @@ class Evaluator:
         """Every point evaluated on the reference objective so far."""
         return list(self._reference)
 
+    def soft_points(self, tau: float) -> list[tuple[float, ...]]:
+        """Every point evaluated on the soft value-and-gradient at temperature multiplier `tau`."""
+        return [x for x, t in self._soft if t == float(tau)]
+
     def hard_points(self) -> list[tuple[float, ...]]:
         """Every point evaluated on the hard objective so far."""
         return list(self._hard)

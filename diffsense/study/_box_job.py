@@ -23,10 +23,12 @@ from diffsense.metrics import (
     is_deterministic,
     load_costs,
     make_cost,
+    member_costs,
 )
 from diffsense.runtime import CompileClock, InputError, to_host
 from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, pareto_sweep
 from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._judge import judged
 from diffsense.study._line_report import reference_summary
 from diffsense.study._objective import objective
 from diffsense.study._problem import Problem, problem_config
@@ -73,12 +75,21 @@ def _units(problem: Problem) -> dict[str, str]:
     return {n: s.unit for n, s in problem.sensing.specs.items()}
 
 
+def _member_costs(problem: Problem, E: Objective, r: dict[str, float]) -> dict[str, float] | None:
+    """Each member's cost at r [currency] for a suite of named members (None otherwise: the
+    kinds' suites keep the result.json they always had)."""
+    if not problem.sensing.has_named_members():
+        return None
+    return member_costs(load_costs(problem.question.costs), E.sensor, r)
+
+
 def _planned(problem: Problem, solves: int = 1) -> int:
     box = problem.solver.box
     return solves * box.max_soft + (box.samples or 2 * len(problem.params) + 2)
 
 
-def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say, on_evaluation: OnEvaluation) -> Result:
+def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say, on_evaluation: OnEvaluation,
+                 judge: bool = True) -> Result:
     """Many parameters (or a cost): the box solve (`diffsense.solve.box_solve`): a coarse hard
     sample, BFGS with temperature continuation from its best points, every answer checked on the
     hard objective J = E_hard + cost_weight * cost."""
@@ -93,6 +104,9 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         x = [box.x_star[n] for n in E.names]
         parts = {"breakdown": breakdown(ev.hard(x), *to_host((E.data.scenario, E.data.weight)),
                                         E.scenario_names, E.spec.horizon_s())}
+        if judge:
+            say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")
+        fresh = judged(problem, E, box.x_star) if judge else None
     notes = tuple(f"{n} is on its {side} bound" for n, side in box.on_bound.items() if side)
     if domain_note(domain):
         notes += (domain_note(domain),)
@@ -103,7 +117,8 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
                 "programs_lowered": clock.lowered},
-        scenarios=tuple(E.scenario_names), config=problem_config(problem), domain=domain, box_notes=notes, **parts)
+        scenarios=tuple(E.scenario_names), config=problem_config(problem), domain=domain, box_notes=notes,
+        judged=fresh, member_costs=_member_costs(problem, E, box.x_star), **parts)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,6 +138,7 @@ class ParetoFront:
         judged_on: which E the designs, the front and the cloud hold: "E_hard" (the threshold law,
             or the hard estimator), or "E_ref" (a probabilistic detection law: the expectation of
             the hard objective over detection draws, as the one-parameter solve judges).
+        member_costs: each design's cost per member {name: cost} (suites of named members; else None).
     """
 
     sensor: str
@@ -135,6 +151,7 @@ class ParetoFront:
     counts: dict[str, int]
     wall_s: float
     judged_on: str = "E_hard"
+    member_costs: tuple[dict[str, float], ...] | None = None
 
     def front(self) -> list[int]:
         """Indices of the non-dominated designs, cheapest first."""
@@ -147,9 +164,16 @@ class ParetoFront:
                     "J": d.J_star, "on_front": f, "on_bound": d.on_bound, "gradient": d.gradient, "source": d.source,
                     "evaluations": d.counts}
                    for lam, d, f in zip(self.lambdas, self.designs, self.on_front)]
+        for design, costs in zip(designs, self.member_costs or ()):
+            design["cost_by_member"] = costs
         return {"sensor": self.sensor, "judged_on": self.judged_on, "currency": self.currency, "units": self.units, "lambdas": list(self.lambdas),
                 "designs": designs, "front": self.front(), "evaluations": self.counts, "wall_s": self.wall_s,
                 "cloud": {"cost": [c for c, _ in self.cloud], key: [e for _, e in self.cloud]}}
+
+
+def _front_member_costs(problem: Problem, E: Objective, designs: Sequence[BoxResult]):
+    costs = [_member_costs(problem, E, d.x_star) for d in designs]
+    return None if None in costs else tuple(costs)
 
 
 def check_lambdas(lambdas: Sequence[float]) -> tuple[float, ...]:
@@ -187,4 +211,4 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
     return ParetoFront(sensor=problem.sensor_kind, units=_units(problem),
                        currency=load_costs(problem.question.costs).currency, lambdas=lambdas, designs=designs,
                        on_front=on_front, cloud=cloud, counts=dict(fns.counts), wall_s=time.perf_counter() - t0,
-                       judged_on=judged_on)
+                       judged_on=judged_on, member_costs=_front_member_costs(problem, E, designs))

@@ -21,6 +21,7 @@ from diffsense.solve import (
 )
 from diffsense.study import _line_report as report
 from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._judge import judged
 from diffsense.study._objective import objective
 from diffsense.study._problem import Problem, problem_config
 from diffsense.study._result import Result
@@ -46,8 +47,8 @@ def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progr
     say(f"{problem.sensor_kind}: simulating {len(problem.traffic.scenarios)} scenarios x {problem.traffic.variants} "
         "variants; ground-truth predictions")
     E = objective(problem, predictor=predictor) if E is None else E
-    # the figures draw E_soft and its slope at the sweep's steps: value-and-gradients either way
-    planned = planned_evaluations(problem, sweep_soft=figures or not _soft_value_is_e_ref(E))
+    # the figures draw E_soft's slope at the sweep's steps, except where E_soft is E_ref (`curves`)
+    planned = planned_evaluations(problem, sweep_soft=not _soft_value_is_e_ref(E))
 
     def counted(kind: str, e_m: float, tau: float) -> None:
         if on_evaluation is not None:
@@ -82,7 +83,7 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
 
 
 def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures: bool, say: Progress,
-                   on_evaluation: Callable[[dict], None] | None) -> tuple[Result, Objective]:
+                  on_evaluation: Callable[[dict], None] | None, judge: bool = True) -> tuple[Result, Objective]:
     """`optimise` of a one-parameter problem (its docstring), and the objective it built or was given."""
     (name, (lo, hi)), = problem.params.items()
     spec, solver = problem.sensing.specs[name], problem.solver
@@ -99,8 +100,12 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
         solve_counts = dict(ev.counts)
         say(f"{problem.sensor_kind}: r* = {result.r_star:.5g} {spec.unit}, "
             f"{'E_hard' if on_hard else 'E_ref'}(r*) = {result.E_hard_star:.4f} m")
-        curves = report.curves(ev, E, result, lo, hi, solver.extra_curve_points, hard_only) if figures else None
+        curves = report.curves(ev, E, result, lo, hi, solver.extra_curve_points, hard_only,
+                               _soft_value_is_e_ref(E)) if figures else None
         parts = report.breakdowns(ev, E, result, problem.question.miss_penalty_m2)
+        if judge:
+            say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")
+        fresh = judged(problem, E, {name: result.r_star}) if judge else None
     figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
     dense = None
     if solver.dense_check is not None:
@@ -122,5 +127,5 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
         scenarios=tuple(E.scenario_names),
         config=problem_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
         flags=tuple(answer["flags"]), domain=domain, reference=report.reference_summary(ev, problem, result.r_star, on_hard),
-        **parts)
+        judged=fresh, **parts)
     return out, E

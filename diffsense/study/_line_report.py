@@ -22,13 +22,24 @@ def first_variant(scenes):
     return jax.tree.map(lambda a: a[0], scenes)
 
 
-def curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: int, hard_only: bool) -> Curves:
+def curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: int, hard_only: bool,
+           soft_is_reference: bool = False) -> Curves:
+    """What the figures draw. `soft_is_reference` (straight-through under a probabilistic law):
+    E_soft's value is E_ref, read from the reference evaluations, and dE/dr is drawn where the
+    solve evaluated it (NaN elsewhere): a value-and-gradient at every sweep step would cost the
+    main job 2K predictor passes a step for the figure alone."""
     tau = result.tau_schedule[-1] if result.tau_schedule else 1.0
-    r_curve = sorted({p.r for p in result.sweep} | {result.r_star}
+    solved = {x[0] for x in ev.soft_points(tau)} if soft_is_reference else set()
+    r_curve = sorted({p.r for p in result.sweep} | {result.r_star} | solved
                      | {float(r) for r in (np.linspace(lo, hi, extra) if extra else [])})
     soft, grad, hard = [], [], []
     for r in r_curve:
-        e2, g = (ev.e_hard(r) ** 2, 0.0) if hard_only else (ev.value_and_grad(r, tau)[0], ev.value_and_grad(r, tau)[1][0])
+        if hard_only:
+            e2, g = ev.e_hard(r) ** 2, 0.0
+        elif soft_is_reference and r not in solved:
+            e2, g = ev.e_reference(r) ** 2, math.nan
+        else:
+            e2, g = ev.value_and_grad(r, tau)[0], ev.value_and_grad(r, tau)[1][0]
         e = math.sqrt(max(e2, 0.0))
         soft.append(e)
         grad.append(g / (2 * e) if e > 0 else 0.0)  # dE/dr = dE^2/dr / (2E)

@@ -55,11 +55,12 @@ def _in_dtype(predictor: Any, predictor_dtype: str, dtype) -> Any:
     return with_compute_dtype(predictor, predictor_dtype) if predictor_dtype != jnp.dtype(dtype).name else predictor
 
 
-def objective(problem: Problem, *, predictor: Any = None) -> Objective:
+def objective(problem: Problem, *, predictor: Any = None, min_vehicles: int = 0) -> Objective:
     """E(r) of `problem`: the scenarios simulated, its sensor (built once, with the problem) and
     its predictor loaded, every random draw fixed by `problem.seed`. `predictor` (optional)
     replaces `problem.prediction.predictor` (an already loaded one, to load it once for several
-    problems)."""
+    problems); `min_vehicles` pads the simulated scenes' vehicle axis to at least that width
+    (absent vehicles, which change no number), so that another objective's programs fit it."""
     traffic, prediction, question = problem.traffic, problem.prediction, problem.question
     dtype = _precision(prediction.float64)
     sensor = problem.sensing.built
@@ -72,7 +73,7 @@ def objective(problem: Problem, *, predictor: Any = None) -> Objective:
             stride_frames=traffic.prediction_stride_frames,
             dtype=dtype)
     else:
-        shifted, index, names, weather = traffic_scenes(problem, predictor.spec, sensor, dtype)
+        shifted, index, names, weather = traffic_scenes(problem, predictor.spec, sensor, dtype, min_vehicles)
         scenes = shifted.base
     frames = prediction_frames(scenes.num_frames, traffic.prediction_stride_frames, predictor.spec, scenes.dt_s)
     return make_objective(scenes, index, frames, sensor, predictor, names=tuple(problem.params),
@@ -92,15 +93,17 @@ def seed_keys(seed: int) -> tuple[jax.Array, jax.Array]:
     return call(_split_seed, seed)
 
 
-def traffic_scenes(problem: Problem, spec, sensor, dtype) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
+def traffic_scenes(problem: Problem, spec, sensor, dtype, min_vehicles: int = 0
+                   ) -> tuple[SpeedShiftedScenes, np.ndarray, tuple[str, ...], Weather]:
     """The problem's simulated scenes as a function of the traffic speed (`objective` evaluates
-    them at the problem's own; `diffsense.sensitivity` differentiates them)."""
+    them at the problem's own; `diffsense.sensitivity` differentiates them); vehicle axis padded
+    to at least `min_vehicles`."""
     scene_key = seed_keys(problem.seed)[0]
     traffic = problem.traffic
     return speed_shifted_scenes(
         traffic.scenarios, traffic.variants, scene_key, spec=spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
         stride_frames=traffic.prediction_stride_frames, background_vehicles=traffic.background_vehicles,
-        dtype=dtype, speed_offset_kmh=traffic.traffic_speed_offset_kmh)
+        dtype=dtype, speed_offset_kmh=traffic.traffic_speed_offset_kmh, min_vehicles=min_vehicles)
 
 
 def memory_estimate_bytes(problem: Problem) -> int:

@@ -22,7 +22,8 @@ from diffsense.study._sensitivity import sensitivity as implicit
 
 def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = None, figures: bool = True,
              progress: Progress | None = None, on_evaluation: Callable[[dict], None] | None = None,
-             sensitivity: tuple[str, ...] = (), distributed: bool | Mapping[str, Any] = False) -> Result:
+             sensitivity: tuple[str, ...] = (), distributed: bool | Mapping[str, Any] = False,
+             judge: bool | None = None) -> Result:
     """The main job: argmin of E over the problem's box, cross-checked by the stepped sweep.
 
     One-parameter problems: the stepped sweep on E_hard, then the continuous solve inside the
@@ -37,15 +38,20 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     calls `optimise` with the same problem and gets the same result.
     `on_evaluation(event)` is called after every objective evaluation the run makes, with
     {"kind": "soft" | "hard" | "reference", "E_m", "tau", "done", "planned"} (for progress displays).
+    `judge` evaluates E_ref at the answer on a fresh seed's scene variants, noise and detection
+    draws (`Result.judged`, result.json's "judged"): the answer judged on data it was not chosen
+    on. By default (None) it does so when `optimise` builds the objective itself; an `E` given is
+    the caller's own data, with no fresh sample known to it.
     """
+    judge = E is None if judge is None else judge
     say = progress or (lambda message: None)
     if distributed:
         initialize(**(dict(distributed) if isinstance(distributed, Mapping) else {}))
     if sensitivity:  # refused before any work, not after the solve
         check_theta(problem, sensitivity)
     if len(problem.params) != 1 or problem.question.cost_weight > 0:
-        return optimise_box(problem, E, predictor, say, on_evaluation)
-    out, E = optimise_line(problem, E, predictor, figures, say, on_evaluation)
+        return optimise_box(problem, E, predictor, say, on_evaluation, judge)
+    out, E = optimise_line(problem, E, predictor, figures, say, on_evaluation, judge)
     if sensitivity:
         say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)} (implicit function theorem)")
         out = dataclasses.replace(out, sensitivity=implicit(problem, out, sensitivity, E=E))

@@ -18,6 +18,10 @@ result.json schema (every key always present; non-finite numbers are written as 
                              (answer_on "E_ref", and the sweep's "E_hard" entries hold E_ref);
                              under the threshold law E_ref = E_hard (one draw, SE 0); null for
                              many-parameter problems
+    "judged"        {"E_ref": m, "E_ref_se": m, "seed": s, "variants": n}   the answer judged on data
+                             it was not chosen on: E_ref at r* over the scene variants, noise and
+                             detection draws of the seed s (`diffsense.study._judge`); null when
+                             the run was asked not to judge
     "sweep"         [{"r": number, "E_hard": m, "E_soft": m}, ...]   the stepped sweep
     "evaluations"   {"objective": int, "gradient": int}  of the continuous solve (sweep excluded)
     "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...}}  compiled-program
@@ -74,7 +78,7 @@ from diffsense.runtime import __version__
 from diffsense.solve import SolveResult
 
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
-RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference", "sweep",
+RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference", "judged", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
                "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "sensitivity", "scenarios",
                "config", "versions")
@@ -167,6 +171,8 @@ class Result:
     box: Any = None
     reference: dict[str, Any] | None = None
     box_notes: tuple[str, ...] = ()
+    judged: dict[str, Any] | None = None
+    member_costs: dict[str, float] | None = None
 
     @property
     def sweep(self):
@@ -210,6 +216,7 @@ class Result:
             "E_soft_star": self.E_soft_star,
             "E_hard_star": self.E_hard_star,
             "reference": self.reference,
+            "judged": self.judged,
             "sweep": [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft}
                       | ({k: b[k] for k in ("by_scenario", "coverage")} if b else {})
                       for p, b in zip(s.sweep, self.sweep_breakdown or [None] * len(s.sweep))],
@@ -244,7 +251,7 @@ class Result:
         out = {
             "sensor": self.sensor, "params": {k: list(v) for k, v in self.params.items()}, "units": dict(self.units),
             "param": None, "interval": None, "r_star": dict(self.r_star), "E_soft_star": self.E_soft_star,
-            "E_hard_star": self.E_hard_star, "reference": self.reference, "sweep": [], "evaluations": self.evaluations,
+            "E_hard_star": self.E_hard_star, "reference": self.reference, "judged": self.judged, "sweep": [], "evaluations": self.evaluations,
             "programs_run": self.programs_run, "wall_s": dict(self.wall_s), "on_bound": self.on_bound,
             "bracket": None, "tau_schedule": list(b.tau_schedule), "notes": list(self.box_notes),
             "objective": self.config.get("objective", "eq12"),
@@ -258,4 +265,6 @@ class Result:
                     "gradient_E": b.gradient_E, "on_bound": b.on_bound, "source": b.source,
                     "counts": b.counts},
         }
+        if self.member_costs is not None:  # a suite of named members: its cost per member [currency]
+            out["box"]["cost_by_member"] = dict(self.member_costs)
         return plain(out)
