@@ -26,7 +26,8 @@ def swept():
     scenes, scenario = toy_scenes(1)
     frames = prediction_frames(scenes.num_frames)[:3]
     E = make_objective(scenes, scenario, frames, problem.sensing.built, ToyPredictor(jax.numpy.asarray(TOY_GAIN)),
-                       names=tuple(PARAMS), key=jax.random.key(2, impl="rbg"))
+                       names=tuple(PARAMS), key=jax.random.key(2, impl="rbg"),
+                       estimator=ds.metrics.EstimatorConfig(reference_draws=4))  # the physical laws, 4 draws
     events, lines = [], []
     front = ds.pareto(problem, LAMBDAS, E=E, progress=lines.append, on_evaluation=events.append)
     return front, events, lines
