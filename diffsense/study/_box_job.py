@@ -75,11 +75,8 @@ def _units(problem: Problem) -> dict[str, str]:
     return {n: s.unit for n, s in problem.sensing.specs.items()}
 
 
-def _member_costs(problem: Problem, E: Objective, r: dict[str, float]) -> dict[str, float] | None:
-    """Each member's cost at r [currency] for a suite of named members (None otherwise: the
-    kinds' suites keep the result.json they always had)."""
-    if not problem.sensing.has_named_members():
-        return None
+def _member_costs(problem: Problem, E: Objective, r: dict[str, float]) -> dict[str, float]:
+    """Each member's cost at r [currency], by member name (a lone sensor's under its kind)."""
     return member_costs(load_costs(problem.question.costs), E.sensor, r)
 
 
@@ -138,7 +135,7 @@ class ParetoFront:
         judged_on: which E the designs, the front and the cloud hold: "E_hard" (the threshold law,
             or the hard estimator), or "E_ref" (a probabilistic detection law: the expectation of
             the hard objective over detection draws, as the one-parameter solve judges).
-        member_costs: each design's cost per member {name: cost} (suites of named members; else None).
+        member_costs: each design's cost per member {name: cost} (a lone sensor's under its kind).
     """
 
     sensor: str
@@ -172,8 +169,7 @@ class ParetoFront:
 
 
 def _front_member_costs(problem: Problem, E: Objective, designs: Sequence[BoxResult]):
-    costs = [_member_costs(problem, E, d.x_star) for d in designs]
-    return None if None in costs else tuple(costs)
+    return tuple(_member_costs(problem, E, d.x_star) for d in designs)
 
 
 def check_lambdas(lambdas: Sequence[float]) -> tuple[float, ...]:

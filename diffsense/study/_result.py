@@ -54,7 +54,8 @@ result.json schema (every key always present; non-finite numbers are written as 
                              check (`diffsense.study._domain`); a scenario outside it also gets a note
     "box"           only for many parameters (or a cost): {"J_star", "cost", "cost_weight",
                              "gradient" (dJ/dr per parameter at r*: what still matters),
-                             "gradient_E", "on_bound" (per parameter), "source", "counts"}
+                             "gradient_E", "on_bound" (per parameter), "source", "counts",
+                             "cost_by_member" ({member: cost} at r*, a lone sensor under its kind)}
     "sensitivity"   {theta: {param: dr*/dtheta}} or null: how r* moves with each ODD parameter asked
                              for (`diffsense.sensitivity`; 0 on a bound)
     "scenarios"     [string, ...]
@@ -265,6 +266,6 @@ class Result:
                     "gradient_E": b.gradient_E, "on_bound": b.on_bound, "source": b.source,
                     "counts": b.counts},
         }
-        if self.member_costs is not None:  # a suite of named members: its cost per member [currency]
+        if self.member_costs is not None:  # the cost per member [currency]
             out["box"]["cost_by_member"] = dict(self.member_costs)
         return plain(out)
