@@ -101,9 +101,10 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         x = [box.x_star[n] for n in E.names]
         parts = {"breakdown": breakdown(ev.hard(x), *to_host((E.data.scenario, E.data.weight)),
                                         E.scenario_names, E.spec.horizon_s())}
+        fresh = None
         if judge:
             say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")
-        fresh = judged(problem, E, box.x_star) if judge else None
+            fresh = judged(problem, E, box.x_star)
     notes = tuple(f"{n} is on its {side} bound" for n, side in box.on_bound.items() if side)
     if domain_note(domain):
         notes += (domain_note(domain),)
@@ -168,10 +169,6 @@ class ParetoFront:
                 "cloud": {"cost": [c for c, _ in self.cloud], key: [e for _, e in self.cloud]}}
 
 
-def _front_member_costs(problem: Problem, E: Objective, designs: Sequence[BoxResult]):
-    return tuple(_member_costs(problem, E, d.x_star) for d in designs)
-
-
 def check_lambdas(lambdas: Sequence[float]) -> tuple[float, ...]:
     """The cost weights of a sweep, sorted ascending; InputError (one line) unless at least two,
     distinct, finite and >= 0."""
@@ -207,4 +204,4 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
     return ParetoFront(sensor=problem.sensor_kind, units=_units(problem),
                        currency=load_costs(problem.question.costs).currency, lambdas=lambdas, designs=designs,
                        on_front=on_front, cloud=cloud, counts=dict(fns.counts), wall_s=time.perf_counter() - t0,
-                       judged_on=judged_on, member_costs=_front_member_costs(problem, E, designs))
+                       judged_on=judged_on, member_costs=tuple(_member_costs(problem, E, d.x_star) for d in designs))

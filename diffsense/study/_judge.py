@@ -42,11 +42,10 @@ def judging_objective(problem: Problem, E: Objective) -> Objective:
     return objective(problem.replace(seed=judge_seed(problem.seed)), predictor=E.predictor, min_vehicles=vehicles)
 
 
-def judged(problem: Problem, E: Objective, r_star: dict[str, float], judge: Objective | None = None) -> dict[str, Any]:
+def judged(problem: Problem, E: Objective, r_star: dict[str, float]) -> dict[str, Any]:
     """result.json's "judged": E_ref [m] at `r_star` on the judging seed with its Monte-Carlo
-    standard error [m], the seed and the variants per scenario. `judge` reuses an already built
-    `judging_objective(problem, E)`."""
-    judge = judging_objective(problem, E) if judge is None else judge
+    standard error [m], the seed and the variants per scenario."""
+    judge = judging_objective(problem, E)
     # the evaluator's own programs: the ones the solve compiled for E's shapes
     ref = Evaluator(judge).reference(np.asarray([r_star[n] for n in judge.names]))
     return {"E_ref": float(ref.e), "E_ref_se": float(ref.e_se), "seed": judge_seed(problem.seed),

@@ -103,9 +103,10 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
         curves = report.curves(ev, E, result, lo, hi, solver.extra_curve_points, hard_only,
                                _soft_value_is_e_ref(E)) if figures else None
         parts = report.breakdowns(ev, E, result, problem.question.miss_penalty_m2)
+        fresh = None
         if judge:
             say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")
-        fresh = judged(problem, E, {name: result.r_star}) if judge else None
+            fresh = judged(problem, E, {name: result.r_star})
     figure_counts = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
     dense = None
     if solver.dense_check is not None:

@@ -191,10 +191,6 @@ class SensingSpec:
         """{name: ParamSpec} of every free parameter: its unit, domain and default."""
         return {name: self.built.spec(name) for name in self.params}
 
-    def has_named_members(self) -> bool:
-        """Whether the sensor is a suite of named members (`Member`s)."""
-        return is_named(self.sensor)
-
     def member_names(self) -> str | list[str] | dict[str, dict[str, Any]]:
         """The sensor as result.json's config names it: its kind, a suite's member names, or
         named members in their mapping form ({name: {"kind", ...}})."""
