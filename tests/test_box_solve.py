@@ -158,7 +158,8 @@ def test_the_answer_is_chosen_on_the_hard_objective():
     def e_hard(x):
         return jnp.sqrt(e2(x, 1.0)) + jnp.where(jnp.max(jnp.abs(x - center) / (HI - LO)) < 0.05, 1.0, 0.0)
 
-    result = box_solve(BoxFunctions.from_jax(NAMES, e2, e_hard), BOUNDS)
+    # checked only where levels end (iterates checked on the way: tests/test_design_screen.py)
+    result = box_solve(BoxFunctions.from_jax(NAMES, e2, e_hard), BOUNDS, BoxConfig(check_every=0))
     sample = [(e.value, e.x) for e in result.history if e.kind == "hard"]
     assert result.J_star == min(sample)[0] and result.source == "sample"
     assert tuple(result.x_star[n] for n in NAMES) == min(sample)[1]
@@ -172,7 +173,7 @@ def test_ties_on_the_hard_objective_go_to_the_first_candidate():
                        RANGE, EXACT)
     assert min(e.value for e in result.history[:4]) == 2.0
     assert [s.J_hard for s in result.starts] == [1.0, 1.0]
-    assert result.J_star == 1.0 and result.source == "start 0 tau 4"
+    assert result.J_star == 1.0 and result.source.startswith("start 0 tau 4")  # its level's end, or on the way
 
 
 def test_each_start_reports_j_soft_at_the_last_temperature():

@@ -121,6 +121,8 @@ def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict
         estimator["samples"] = args.mc_samples
     if args.draws is not None:
         estimator["reference_draws"] = args.draws
+    if args.gradient_draws is not None:
+        estimator["gradient_draws"] = args.gradient_draws
     fields["estimator"] = EstimatorConfig(**estimator)
     if args.tau is not None:
         if not (math.isfinite(args.tau) and args.tau > 0):

@@ -6,14 +6,15 @@
   uniform draws are fixed by a key (common random numbers), so the estimate is deterministic in r.
   A suite's members are drawn each on its own from their own uniforms, as E_ref draws them, and
   a sample's track is the fusion of the members that drew a detection.
-- `relaxed-reference`: the reference's own K Bernoulli draws (the uniforms of E_ref,
-  `_reference.py`), each relaxed: detection sigmoid((logit p - logit u) / lambda) in place of
-  1[u < p]. As lambda -> 0 every relaxed draw becomes the reference's hard one, so the estimate
-  tends to E_ref itself at every r, its argmin to E_ref's; lambda trades that bias for a
-  gradient that sees more than the few draws on the edge of flipping. Under a deterministic
+- `relaxed-reference`: the reference's own Bernoulli draws (the uniforms of E_ref,
+  `_reference.py`; the first `gradient_draws` of its K), each relaxed: detection
+  sigmoid((logit p - logit u) / lambda) in place of 1[u < p]. As lambda -> 0 every relaxed draw
+  becomes the reference's hard one, so the estimate tends to E_ref on those draws at every r (all
+  K of them when gradient_draws >= K); lambda trades that bias for a gradient that sees more than
+  the few draws on the edge of flipping. Under a deterministic
   detection law there is nothing to draw and it is mean-field.
 - `straight-through`: the value of E_ref itself (the reference's K hard draws), the gradient of
-  relaxed-reference: E_ref + (E_relaxed - stop_gradient(E_relaxed)). The value no longer trades
+  relaxed-reference (on its `gradient_draws`): E_ref + (E_relaxed - stop_gradient(E_relaxed)). The value no longer trades
   bias for smoothness, so lambda is chosen for the gradient alone. It costs relaxed-reference's
   evaluation plus K forward passes. The straight-through is taken on the whole objective, not on
   each draw: per draw, the gradient would be the objective's slope at the hard draw times the
@@ -60,6 +61,12 @@ class EstimatorConfig:
             logit units [-]; the solver's continuation scales it like the gates' temperatures.
         reference_draws: K, Bernoulli draws per (frame, vehicle) of the reference objective
             E_ref (`Objective.reference`) [-]; unused by a deterministic detection law.
+        gradient_draws: K_g, how many of those draws (the first min(K_g, K)) "relaxed-reference"
+            relaxes, and "straight-through" takes its gradient from [-]. A gradient of the
+            relaxed draws costs several values of E_ref at K (each draw's predictor pass is run
+            forward, again in the backward pass, and backward), so a solve descends on a
+            fraction of the draws, as stochastic optimisation descends on a mini-batch, and
+            judges its answers on all K (`benchmarks/bench_design.py` measures the trade).
     """
 
     kind: Estimator = "auto"
@@ -67,6 +74,7 @@ class EstimatorConfig:
     relax_temperature: float = 0.5
     reference_draws: int = 32
     reference_temperature: float = 0.01
+    gradient_draws: int = 8
 
     def __post_init__(self):
         if self.kind not in ESTIMATORS:
@@ -75,6 +83,8 @@ class EstimatorConfig:
             raise InputError(f"estimator samples must be >= 1, got {self.samples}")
         if self.reference_draws < 2:
             raise InputError(f"reference_draws must be >= 2 (a standard error needs two), got {self.reference_draws}")
+        if self.gradient_draws < 1:
+            raise InputError(f"gradient_draws must be >= 1, got {self.gradient_draws}")
         for name in ("relax_temperature", "reference_temperature"):
             if not getattr(self, name) > 0.0:
                 raise InputError(f"{name} must be > 0, got {getattr(self, name)}")

@@ -214,8 +214,9 @@ class Objective(eqx.Module):
             d = hard(draw)
             return reduce(self._predict(d), d)
 
-        # E_ref's value (the hard draws), the relaxed draws' gradient
-        return straight_through(jnp.mean(jax.lax.map(one_hard, draws), axis=0), relaxed)
+        # E_ref's value (all K hard draws), the relaxed draws' gradient
+        value = jnp.mean(jax.lax.map(one_hard, jnp.arange(self.estimator.reference_draws)), axis=0)
+        return straight_through(value, relaxed)
 
     def sq_error(self, r: Params, tau: float | Array = 1.0) -> Float[Array, "N F"]:
         """The soft E^2 split by scene variant and horizon step [m^2].

@@ -18,8 +18,9 @@ from diffsense.sensors import Suite
 
 def estimator_samples(objective: Any, r: Mapping[str, Any], tau: Any) -> tuple[Array, Callable, Callable | None] | None:
     """The drawn estimators' samples of `objective` (a `diffsense.metrics.Objective`) at r (a
-    dict): (what each sample is indexed by, sample -> relaxed Detections, sample -> hard
-    Detections for straight-through or None); None for the one-pass mean-field."""
+    dict): (what each relaxed sample is indexed by, sample -> relaxed Detections, draw -> hard
+    Detections for straight-through, whose value is drawn on all K reference draws, or None);
+    None for the one-pass mean-field."""
     kind, key = objective.estimator_kind, objective.data.noise_key
     if kind in ("relaxed-reference", "straight-through") and not is_deterministic(objective.sensor):
         # The reference's own events (exact occlusion geometry; a suite's members one by
@@ -32,7 +33,8 @@ def estimator_samples(objective: Any, r: Mapping[str, Any], tau: Any) -> tuple[A
                                           for p, u in zip(events.p_detect, events.uniforms(key, k))])
         hard = lambda k: events.combine([(u < p).astype(objective.dtype)
                                          for p, u in zip(events.p_detect, events.uniforms(key, k))])
-        return jnp.arange(objective.estimator.reference_draws), relax, hard if kind == "straight-through" else None
+        relaxed = min(objective.estimator.gradient_draws, objective.estimator.reference_draws)
+        return jnp.arange(relaxed), relax, hard if kind == "straight-through" else None
     if kind != "mc":
         return None
     lam = objective.estimator.relax_temperature

@@ -8,7 +8,8 @@
     dense_grid_search, basin_check   the brute-force baseline and its basin cross-check
     hard_grid_solve              the hard estimator's search (no gradient): sweep + inner grid
     Evaluator                    a pure objective compiled once, memoised and counted
-    box_solve, BoxConfig         many parameters in a box: Halton sample, BFGS per temperature
+    box_solve, BoxConfig         many parameters in a box: Halton sample (or a batched screen), BFGS
+                                 per temperature, iterates checked on the hard objective
     pareto_sweep, pareto_front   one box solve per cost weight; which (E, cost) are Pareto-optimal
     near_optimal, explain        the answer's near-optimal set and its flags, in words
 

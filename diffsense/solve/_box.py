@@ -2,11 +2,18 @@
 
 Strategy:
 1. a coarse space-filling sample of the box (a Halton sequence, randomly shifted by `seed`) is
-   evaluated on the HARD objective; its best points are the starts;
+   evaluated on the HARD objective; its best points are the starts. Where the functions offer a
+   screen (`BoxFunctions.screen`: under a probabilistic detection law, E_ref on its first
+   `screen_draws` draws, many points per compiled program), a larger sample (`screen_points`) is
+   screened instead and only its best `starts` are evaluated on the hard objective: a point on
+   a plateau (a sensor that sees almost nothing, J tens of metres above the optimum's) is told
+   from a good one on a few draws, so the starts are not left to the luck of 2 d + 2 points;
 2. from each start, optimistix BFGS minimises the SOFT J at each temperature of the
    continuation schedule, largest first, each level warm-started from the one before;
-3. each start's answer at every temperature is checked on the HARD objective, and the answer
-   is the best hard J of all these and the sample points (never worse than the sample's best);
+3. each start's answer at every temperature, and its iterate every `check_every` BFGS steps,
+   is checked on the HARD objective, and the answer is the best hard J of all these and the
+   sample points (never worse than the sample's best): a descent's progress becomes an answer
+   as it is made, not only where a level ends;
 4. at the answer: E_hard, E_soft, cost, the soft gradient per parameter at the last
    temperature, and which parameters lie on a bound.
 
@@ -22,7 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -41,7 +48,10 @@ class BoxConfig:
     """Settings of `box_solve`.
 
     Attributes:
-        samples: size of the coarse hard sample (0: 2 d + 2 for d parameters).
+        samples: size of the coarse hard sample (0: 2 d + 2 for d parameters) where no screen runs.
+        screen_points: size of the screened sample where the functions can screen (0: 8 d + 8;
+            -1: no screen, the hard sample instead).
+        screen_draws: detection draws of a screened value (the box job's screen) [-].
         starts: BFGS runs, from the best sample points [-].
         tau_schedule: temperature multipliers of the continuation, largest first.
         max_steps: BFGS steps per start and temperature (each one soft evaluation) [-].
@@ -51,12 +61,16 @@ class BoxConfig:
         ftol: a level also stops when J has fallen by less than ftol * |J| over its last 3
             accepted steps (relative; earlier levels use it scaled by tau / tau_last).
         first_step_rad: the first BFGS step's largest move in t [rad].
+        check_every: the BFGS iterate is checked on the hard objective (an answer candidate)
+            every this many steps as well as at each level's end (0: at the end only).
         bound_tol: distance to a bound, relative to the box, within which a parameter is put on it.
         cost_weight: lambda in J = E + lambda * cost [m per currency unit].
         seed: shifts the Halton sample.
     """
 
     samples: int = 0
+    screen_points: int = 0
+    screen_draws: int = 4
     starts: int = 2
     tau_schedule: tuple[float, ...] = (4.0, 2.0, 1.0)
     max_steps: int = 30
@@ -65,6 +79,7 @@ class BoxConfig:
     atol: float = 1e-6
     ftol: float = 1e-4
     first_step_rad: float = 0.5
+    check_every: int = 3
     bound_tol: float = 1e-6
     cost_weight: float = 0.0
     seed: int = 0
@@ -73,9 +88,13 @@ class BoxConfig:
         taus = tuple(float(t) for t in self.tau_schedule)
         if not taus or not all(math.isfinite(t) and t > 0 for t in taus) or list(taus) != sorted(taus, reverse=True):
             raise InputError(f"tau_schedule {taus} must be positive numbers, largest first")
-        for name in ("samples", "starts", "max_steps", "max_soft"):
+        for name in ("samples", "starts", "max_steps", "max_soft", "check_every"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.screen_points < -1:
+            raise InputError(f"screen_points must be >= -1 (-1: no screen), got {self.screen_points}")
+        if self.screen_draws < 2:
+            raise InputError(f"screen_draws must be >= 2, got {self.screen_draws}")
         if not (self.cost_weight >= 0 and math.isfinite(self.cost_weight)):
             raise InputError(f"cost_weight must be a finite number >= 0, got {self.cost_weight}")
 
@@ -104,9 +123,11 @@ class BoxResult:
         gradient: dJ_soft/dx at r* per parameter [m per unit] (at the last temperature).
         gradient_E: dE_soft/dx at r* per parameter [m per unit].
         on_bound: per parameter "lower", "upper" or "" (interior).
-        source: "start k tau T" (the k-th BFGS run's answer at temperature T) or "sample".
+        source: "start k tau T" (the k-th BFGS run's answer at temperature T), "start k tau T step"
+            (an iterate checked on the way) or "sample".
         starts: every BFGS run.
-        counts: distinct soft (value and gradient) and hard evaluations the solve made.
+        counts: distinct soft (value and gradient) and hard evaluations the solve made, and
+            "screen", the points screened, where a screen ran.
         history: every evaluation in order (`BoxFunctions.history` since the solve began).
     """
 
@@ -170,9 +191,11 @@ class _Runner:
         loose = tau / float(self.config.tau_schedule[-1])
         return self.config.rtol * loose, self.config.atol * loose, self.config.ftol * loose
 
-    def run(self, t0: np.ndarray, tau: float, budget: int) -> tuple[np.ndarray, int]:
+    def run(self, t0: np.ndarray, tau: float, budget: int,
+            check: Callable[[np.ndarray], None] | None = None) -> tuple[np.ndarray, int]:
         """BFGS from t0 at temperature tau until the soft count reaches `budget`: (t at the end,
-        steps taken). J is scaled by `_first_scale`."""
+        steps taken). J is scaled by `_first_scale`. `check(t)` is called with the accepted
+        iterate every `check_every` steps where it has moved since the last call."""
         j, g_t = self.j_t(t0, tau, 1.0)
         scale = _first_scale(float(j), float(np.max(np.abs(g_t))), self.config.first_step_rad)
         rtol, atol, ftol = self.tolerances(tau)
@@ -180,10 +203,14 @@ class _Runner:
         args = (jnp.asarray(tau, jnp.float64), jnp.asarray(scale, jnp.float64))
         t = jnp.asarray(t0, jnp.float64)
         state = self._init(solver, t, args)
-        steps, accepted = 0, []
+        steps, accepted, checked = 0, [], np.asarray(t0, np.float64)
+        every = self.config.check_every
         while steps < self.config.max_steps and self.fns.counts["soft"] < budget:
             t, state = self._step(solver, t, args, state)
             steps += 1
+            if check is not None and every and steps % every == 0 and not np.array_equal(np.asarray(t), checked):
+                checked = np.asarray(t, np.float64)
+                check(checked)
             # optimistix tests convergence on accepted steps only; near a minimum J's decrease
             # falls below rounding, Armijo rejects, and the steps shrink around the answer for
             # ever. So stop too when the next trial point moves t by less than the tolerance,
@@ -229,6 +256,19 @@ def _check_bounds(names: Sequence[str], bounds: Any) -> tuple[np.ndarray, np.nda
     return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
 
 
+def _sample(fns: BoxFunctions, box: _Box, given: list[np.ndarray], config: BoxConfig) -> list[np.ndarray]:
+    """The points evaluated on the hard objective before any descent: `given` and the Halton
+    sample, or, where the functions can screen, the best `starts` of `given` and a larger
+    Halton sample ranked on the screen's J (module doc, step 1)."""
+    d = len(box.lo)
+    if not (fns.can_screen and config.screen_points >= 0):
+        return given + list(box.lo + box.width * halton(config.samples or 2 * d + 2, d, config.seed))
+    points = given + list(box.lo + box.width * halton(config.screen_points or 8 * d + 8, d, config.seed))
+    cost = np.array([fns.cost(p)[0] for p in points])
+    order = np.argsort(fns.screen(np.array(points)) + config.cost_weight * cost, kind="stable")
+    return [points[i] for i in order[: max(config.starts, 1)]]
+
+
 def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
               extra_starts: Sequence[Sequence[float]] = ()) -> BoxResult:
     """argmin of E + cost_weight * cost over the box `bounds` ({name: (lo, hi)} or a list in the
@@ -239,8 +279,7 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
     d, lam, first, counts0 = len(names), config.cost_weight, len(fns.history), dict(fns.counts)
     budget = counts0["soft"] + config.max_soft
     box = _Box(lo, hi, config.bound_tol)
-    points = [box.x(box.t(p)) for p in extra_starts]  # a start outside the box: on its bound
-    points += list(lo + (hi - lo) * halton(config.samples or 2 * d + 2, d, config.seed))
+    points = _sample(fns, box, [box.x(box.t(p)) for p in extra_starts], config)  # outside the box: on its bound
     sample = sorted(((fns.j_hard(p, lam)[0], i) for i, p in enumerate(points)))
     runner = _Runner(fns, box, lam, config) if config.starts else None
     starts: list[StartResult] = []
@@ -248,7 +287,11 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
     for k, (_, i) in enumerate(sample[: config.starts]):
         t, steps = box.t(points[i]), []
         for tau in config.tau_schedule:
-            t, n = runner.run(t, float(tau), budget) if fns.counts["soft"] < budget else (t, 0)
+            def check(t_now, label=f"start {k} tau {tau:g} step"):
+                x_now, _ = box.snap(box.x(t_now))
+                candidates.append((fns.j_hard(x_now, lam)[0], label, x_now))
+
+            t, n = runner.run(t, float(tau), budget, check) if fns.counts["soft"] < budget else (t, 0)
             steps.append(n)
             x, _ = box.snap(box.x(t))
             j_hard = fns.j_hard(x, lam)[0]  # every level's answer: the hard check is one evaluation
@@ -265,7 +308,7 @@ def box_solve(fns: BoxFunctions, bounds: Any, config: BoxConfig = BoxConfig(),
         names=names, bounds={n: (float(a), float(b)) for n, a, b in zip(names, lo, hi)},
         x_star=_named(names, x_star), J_star=float(j_star), E_hard=e_hard, E_soft=e_soft, cost=cost,
         gradient=_named(names, grad), gradient_E=_named(names, grad_e), on_bound=dict(zip(names, flags)),
-        source=source, starts=tuple(starts), counts={k: fns.counts[k] - counts0[k] for k in counts0},
+        source=source, starts=tuple(starts), counts={k: v - counts0.get(k, 0) for k, v in fns.counts.items()},
         history=tuple(fns.history[first:]),
         tau_schedule=tuple(float(t) for t in config.tau_schedule), cost_weight=float(lam))
 

@@ -1,15 +1,17 @@
 """What a box solve evaluates: soft E^2 with its gradient, hard E, and a cost, memoised and counted.
 
-`BoxFunctions` wraps three host-side functions of a parameter vector x (values of `names`, in
+`BoxFunctions` wraps three (or four) host-side functions of a parameter vector x (values of `names`, in
 that order):
 
     e2_soft(x, tau) -> (E^2 [m^2], dE^2/dx)    the smooth objective at temperature multiplier tau
     e_hard(x) -> E [m]                          the reference (0/1 detections)
     cost(x) -> (cost, dcost/dx)                 optional (`diffsense.metrics._cost.make_cost`)
+    e_screen(X) -> E [m] per row of X [P, d]    optional: a cheaper, noisier e_hard of many
+                                                points at once (E_ref on its first few draws)
 
-and forms the solver's objective J = E + cost_weight * cost, soft or hard. Every distinct soft
-and hard evaluation is counted once (a repeated point costs nothing) and recorded in order in
-`history`, so a benchmark can draw the best value against the evaluations spent; `listener`, if
+and forms the solver's objective J = E + cost_weight * cost, soft or hard. Every distinct soft,
+hard and screened evaluation is counted once (a repeated point costs nothing; counts["screen"]
+is kept only once a screen has run) and recorded in order in `history`, so a benchmark can draw the best value against the evaluations spent; `listener`, if
 set, is called with each new `Event` (a progress display). Build it from
 a `diffsense.solve.Evaluator` (`from_evaluator`), from jax functions (`from_jax`), or directly.
 """
@@ -28,11 +30,13 @@ import numpy as np
 SoftFn = Callable[[np.ndarray, float], tuple[float, np.ndarray]]
 HardFn = Callable[[np.ndarray], float]
 CostFn = Callable[[np.ndarray], tuple[float, np.ndarray]]
+ScreenFn = Callable[[np.ndarray], np.ndarray]
 
 
 @dataclasses.dataclass(frozen=True)
 class Event:
-    """One evaluation a solve made: kind "soft" (tau set, value E_soft [m]) or "hard" (E_hard [m])."""
+    """One evaluation a solve made: kind "soft" (tau set, value E_soft [m]), "hard" (E_hard [m])
+    or "screen" (the screen's cheaper E [m])."""
 
     kind: str
     x: tuple[float, ...]
@@ -43,26 +47,32 @@ class Event:
 class BoxFunctions:
     """E_soft, E_hard and cost of a parameter vector, memoised, counted and recorded."""
 
-    def __init__(self, names: Sequence[str], e2_soft: SoftFn, e_hard: HardFn, cost: CostFn | None = None):
+    def __init__(self, names: Sequence[str], e2_soft: SoftFn, e_hard: HardFn, cost: CostFn | None = None,
+                 e_screen: ScreenFn | None = None):
         self.names = tuple(names)
-        self._e2_soft, self._e_hard, self._cost = e2_soft, e_hard, cost
+        self._e2_soft, self._e_hard, self._cost, self._e_screen = e2_soft, e_hard, cost, e_screen
         self.counts = {"soft": 0, "hard": 0}
         self.history: list[Event] = []
         self.listener: Callable[[Event], None] | None = None
         self._soft: dict[tuple, tuple[float, np.ndarray]] = {}
         self._hard: dict[tuple, float] = {}
         self._costs: dict[tuple, tuple[float, np.ndarray]] = {}
+        self._screened: dict[tuple, float] = {}
 
     @classmethod
     def from_evaluator(cls, evaluator: Any, cost: Callable[[Mapping[str, Any]], Any] | None = None,
-                       e_answer: HardFn | None = None) -> BoxFunctions:
+                       e_answer: HardFn | None = None, screen_draws: int | None = None,
+                       batch: int = 8) -> BoxFunctions:
         """From a `diffsense.solve.Evaluator` (its objective's `names` order x); `cost` a
         jax-differentiable cost(r) over the same names (e.g. `make_cost(model, sensor)`);
         `e_answer` the objective answers are judged on in place of its E_hard (E_ref, under a
-        probabilistic detection law)."""
+        probabilistic detection law); `screen_draws` K_s gives the screen: E_ref on its first K_s
+        draws, `batch` points per program (`Evaluator.reference_batch`)."""
         names = evaluator.objective.names
+        screen = None if screen_draws is None else (
+            lambda xs: evaluator.reference_batch(xs, draws=screen_draws, batch=batch))
         return cls(names, evaluator.value_and_grad, e_answer or evaluator.e_hard,
-                   None if cost is None else _jit_cost(names, cost))
+                   None if cost is None else _jit_cost(names, cost), screen)
 
     @classmethod
     def from_jax(cls, names: Sequence[str], e2_soft: Callable, e_hard: Callable,
@@ -105,6 +115,23 @@ class BoxFunctions:
             self.counts["hard"] += 1
             self._record(Event("hard", key, None, self._hard[key]))
         return self._hard[key]
+
+    @property
+    def can_screen(self) -> bool:
+        return self._e_screen is not None
+
+    def screen(self, xs) -> np.ndarray:
+        """The screen's E [m] of each row of xs [P, d], memoised: the new points in one call
+        (batched programs)."""
+        keys = [self._key(x) for x in np.atleast_2d(np.asarray(xs, np.float64))]
+        new = list(dict.fromkeys(k for k in keys if k not in self._screened))
+        if new:
+            values = np.asarray(self._e_screen(np.array(new)), np.float64).reshape(len(new))
+            for key, v in zip(new, values):
+                self._screened[key] = float(v)
+                self.counts["screen"] = self.counts.get("screen", 0) + 1
+                self._record(Event("screen", key, None, float(v)))
+        return np.array([self._screened[k] for k in keys])
 
     def _record(self, event: Event) -> None:
         self.history.append(event)

@@ -4,7 +4,8 @@ The objective (`diffsense.metrics.Objective`) is pure and stateless; a solve ask
 point more than once (a sweep step again for a figure, the answer's hard value), so the wrapper
 keeps every evaluation by (r, tau), counts the programs actually run, and compiles one program
 per kind of evaluation it is asked for: the soft value-and-gradient, the hard evaluation, the
-reference (E_ref) and the detections. The objective is an argument of each program, never a closure, so XLA does not fold
+reference (E_ref), the reference of many points at once (vmap over r, on the first few draws:
+a screen) and the detections. The objective is an argument of each program, never a closure, so XLA does not fold
 its data in as constants.
 """
 
@@ -46,6 +47,11 @@ def _reference(objective, x):
     return objective.reference(objective.point(x))
 
 
+def _reference_batch(objective, xs, draws):
+    # one program for B points: vmap over r grows every product of the predictor by B
+    return jax.vmap(lambda x: objective.reference(objective.point(x), draws).e)(xs)
+
+
 def _detections(objective, x, tau, mode):
     return objective.detections(objective.point(x), mode, tau)
 
@@ -65,6 +71,7 @@ class Evaluator:
         self._hard: dict[tuple, Any] = {}
         self._reference: dict[tuple, Any] = {}
         self.reference_count = 0  # reference programs run (each K hard passes for a random law)
+        self.screened = 0  # points evaluated by `reference_batch`
         self._progress = progress
 
     def _array(self, values) -> np.ndarray:
@@ -121,6 +128,23 @@ class Evaluator:
             if self._progress:
                 self._progress("reference", float(self._reference[key].e), 0.0)
         return self._reference[key]
+
+    def reference_batch(self, xs, draws: int | None = None, batch: int = 8) -> np.ndarray:
+        """E_ref [m] of each row of `xs` [P, d] on its first `draws` detection draws (None: all
+        K), `batch` points per compiled program (vmap over r; the last batch padded with its
+        last point, so one program serves any P). With common random numbers the first draws
+        are E_ref's own: a value on fewer draws is the same estimator, noisier. Not memoised."""
+        xs = np.atleast_2d(np.asarray(xs, np.float64))
+        k = self.objective.estimator.reference_draws if draws is None else int(draws)
+        ids = np.arange(k, dtype=np.int32)
+        out = []
+        for start in range(0, len(xs), batch):
+            chunk = xs[start:start + batch]
+            padded = np.concatenate([chunk, np.repeat(chunk[-1:], batch - len(chunk), axis=0)])
+            values = to_host(call(_reference_batch, self.objective, self._array(padded), ids))
+            out.append(np.asarray(values, np.float64)[: len(chunk)])
+        self.screened += len(xs)
+        return np.concatenate(out) if out else np.zeros(0)
 
     def e_reference(self, x) -> float:
         """E_ref [m]: the hard objective's expectation over detection draws."""

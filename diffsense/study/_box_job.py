@@ -43,13 +43,18 @@ Say = Callable[[str], None]
 OnEvaluation = Callable[[dict], None] | None
 
 
-def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, planned: int):
+def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, solves: int = 1):
     """The Evaluator, the box functions (cost model included) and the clipped default start."""
     ev = Evaluator(E)
     # Under a probabilistic detection law answers are judged on E_ref, the expectation the
     # estimator approximates (as the one-parameter solve does); under the threshold law it is E_hard.
     e_answer = None if _on_hard(problem, E) else ev.e_reference
-    fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.question.costs), E.sensor), e_answer=e_answer)
+    # ... and the starts are screened on E_ref's first few draws: a cheaper value of the same
+    # estimator (no cheaper fidelity exists where E_hard is the answer)
+    screen = None if _on_hard(problem, E) else min(problem.solver.box.screen_draws, E.estimator.reference_draws)
+    fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.question.costs), E.sensor),
+                                      e_answer=e_answer, screen_draws=screen)
+    planned = _planned(problem, screen is not None, solves)
     if on_evaluation is not None:
         def listen(event) -> None:  # what a progress display shows: E, the cost there, the count
             done = sum(fns.counts.values())
@@ -80,9 +85,13 @@ def _member_costs(problem: Problem, E: Objective, r: dict[str, float]) -> dict[s
     return member_costs(load_costs(problem.question.costs), E.sensor, r)
 
 
-def _planned(problem: Problem, solves: int = 1) -> int:
-    box = problem.solver.box
-    return solves * box.max_soft + (box.samples or 2 * len(problem.params) + 2)
+def _planned(problem: Problem, screening: bool, solves: int = 1) -> int:
+    """The evaluations a progress display expects: the soft budget, and the hard sample or the
+    screen with its best points."""
+    box, d = problem.solver.box, len(problem.params)
+    if screening and box.screen_points >= 0:
+        return solves * box.max_soft + (box.screen_points or 8 * d + 8) + box.starts
+    return solves * box.max_soft + (box.samples or 2 * d + 2)
 
 
 def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say, on_evaluation: OnEvaluation,
@@ -93,7 +102,7 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     with CompileClock() as clock:
         say(_simulating(problem))
         E = objective(problem, predictor=predictor) if E is None else E
-        ev, fns, start = _functions(problem, E, on_evaluation, _planned(problem))
+        ev, fns, start = _functions(problem, E, on_evaluation)
         domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
         say(f"{problem.sensor_kind}: box solve of {', '.join(problem.params)}")
         config = dataclasses.replace(problem.solver.box, cost_weight=problem.question.cost_weight, seed=problem.seed)
@@ -191,7 +200,7 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
     t0 = time.perf_counter()
     say(_simulating(problem))
     E = objective(problem, predictor=predictor) if E is None else E
-    ev, fns, start = _functions(problem, E, on_evaluation, _planned(problem, len(lambdas)))
+    ev, fns, start = _functions(problem, E, on_evaluation, len(lambdas))
     config = dataclasses.replace(problem.solver.box, seed=problem.seed)
     judged_on = "E_hard" if _on_hard(problem, E) else "E_ref"
 

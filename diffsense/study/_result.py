@@ -182,7 +182,8 @@ class Result:
     @property
     def evaluations(self) -> dict[str, int]:
         if self.solve is None:
-            return {"objective": self.box.counts["hard"], "gradient": self.box.counts["soft"]}
+            screened = {"screened": self.box.counts["screen"]} if "screen" in self.box.counts else {}
+            return {"objective": self.box.counts["hard"], "gradient": self.box.counts["soft"]} | screened
         return dict(self.solve.evaluations)
 
     @property
