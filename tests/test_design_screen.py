@@ -6,6 +6,8 @@ draws of E_ref's own) and the box job's use of them under a probabilistic law.""
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -120,7 +122,7 @@ def test_a_descents_iterate_is_an_answer_where_the_levels_end_is_worse():
 
     config = BoxConfig(samples=1, starts=1, tau_schedule=(1.0,), max_steps=30, check_every=1, seed=3)
     checked = box_solve(BoxFunctions(NAMES, soft, hard), BOUNDS, config)
-    ends = box_solve(BoxFunctions(NAMES, soft, hard), BOUNDS, BoxConfig(**{**config.__dict__, "check_every": 0}))
+    ends = box_solve(BoxFunctions(NAMES, soft, hard), BOUNDS, dataclasses.replace(config, check_every=0))
     assert checked.source.endswith("step") and checked.J_star < 10.0
     assert ends.J_star > checked.J_star and not ends.source.endswith("step")
 
@@ -147,11 +149,10 @@ def test_the_batched_reference_is_each_points_own_on_the_first_draws():
     first = ev.reference_batch(xs, draws=3, batch=4)
     want = [float(E.reference(E.point(jnp.asarray(x)), jnp.arange(3)).e) for x in xs]
     np.testing.assert_allclose(first, want, rtol=1e-12)
-    assert ev.screened == 10
 
 
 def test_under_a_random_law_the_box_job_screens_and_reports_it():
-    problem = _problem(sensor_config=SWERLING, box=BoxConfig(**{**TINY.__dict__, "screen_points": 6}))
+    problem = _problem(sensor_config=SWERLING, box=dataclasses.replace(TINY, screen_points=6))
     result = ds.optimise(problem, E=_toy_objective(problem))
     assert result.evaluations["screened"] == 6 + 1  # the screen and the sensors' default point
     threshold = _problem(box=TINY)

@@ -79,8 +79,8 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
                    help="detection draws K of the reference E_ref a probabilistic law is answered on "
                         "(default 32; each costs a predictor pass per evaluation; docs: detection)")
     p.add_argument("--gradient-draws", type=int, metavar="KG",
-                   help="of those, the first KG are relaxed for the gradient (default 8: a mini-batch, "
-                        "a gradient then costs about one value of E_ref; docs: detection)")
+                   help="of those, the first KG are relaxed for the gradient (default 8: a mini-batch; "
+                        "answers stay on all K; docs: detection)")
     p.add_argument("--objective", choices=("eq12", "tracked"),
                    help="eq12: the paper's E over every instant; tracked: the error where the target has a "
                    "track plus --miss-penalty per missed share")

@@ -1,7 +1,7 @@
 """What a box solve evaluates: soft E^2 with its gradient, hard E, and a cost, memoised and counted.
 
-`BoxFunctions` wraps three (or four) host-side functions of a parameter vector x (values of `names`, in
-that order):
+`BoxFunctions` wraps three (or four) host-side functions of a parameter vector x (values of
+`names`, in that order):
 
     e2_soft(x, tau) -> (E^2 [m^2], dE^2/dx)    the smooth objective at temperature multiplier tau
     e_hard(x) -> E [m]                          the reference (0/1 detections)
@@ -11,9 +11,10 @@ that order):
 
 and forms the solver's objective J = E + cost_weight * cost, soft or hard. Every distinct soft,
 hard and screened evaluation is counted once (a repeated point costs nothing; counts["screen"]
-is kept only once a screen has run) and recorded in order in `history`, so a benchmark can draw the best value against the evaluations spent; `listener`, if
-set, is called with each new `Event` (a progress display). Build it from
-a `diffsense.solve.Evaluator` (`from_evaluator`), from jax functions (`from_jax`), or directly.
+is kept only once a screen has run) and recorded in order in `history`, so a benchmark can draw
+the best value against the evaluations spent; `listener`, if set, is called with each new
+`Event` (a progress display). Build it from a `diffsense.solve.Evaluator` (`from_evaluator`),
+from jax functions (`from_jax`), or directly.
 """
 
 from __future__ import annotations

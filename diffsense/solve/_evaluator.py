@@ -71,7 +71,6 @@ class Evaluator:
         self._hard: dict[tuple, Any] = {}
         self._reference: dict[tuple, Any] = {}
         self.reference_count = 0  # reference programs run (each K hard passes for a random law)
-        self.screened = 0  # points evaluated by `reference_batch`
         self._progress = progress
 
     def _array(self, values) -> np.ndarray:
@@ -143,7 +142,6 @@ class Evaluator:
             padded = np.concatenate([chunk, np.repeat(chunk[-1:], batch - len(chunk), axis=0)])
             values = to_host(call(_reference_batch, self.objective, self._array(padded), ids))
             out.append(np.asarray(values, np.float64)[: len(chunk)])
-        self.screened += len(xs)
         return np.concatenate(out) if out else np.zeros(0)
 
     def e_reference(self, x) -> float:
