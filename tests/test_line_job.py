@@ -82,7 +82,8 @@ def test_the_dense_check_and_the_domain_note_end_the_notes(solved):
     assert result.dense_check["step"] == 40.0 and result.dense_check["evaluations"] == 3  # 20, 60, 100
     assert result.domain["validation_rmse_m"] == (0.01, 0.02, 0.03, 0.04, 0.05)
     assert result.domain["outside"] == ["scenario0"]
-    assert result.notes[-2:] == ("dense check: " + result.dense_check["verdict"], domain_note(result.domain))
+    solve_notes = [n for n in result.notes if not n.startswith("sensitivity to")]  # the sensitivity's follow
+    assert tuple(solve_notes[-2:]) == ("dense check: " + result.dense_check["verdict"], domain_note(result.domain))
     assert "warning: " + domain_note(result.domain) in lines
 
 
@@ -128,8 +129,11 @@ def test_under_a_probabilistic_law_the_near_optimal_set_is_judged_on_e_ref():
     assert result.near_optimal["tolerance_m"] == pytest.approx(0.005 * result.reference["E_ref_star"], rel=1e-12)
 
 
+SECANT = SolveConfig(method="secant", max_evaluations=9)  # the gradient continuation, not Brent
+
+
 def test_under_straight_through_the_sweep_reads_e_soft_off_e_ref_and_every_value_is_a_candidate():
-    problem = _swerling()
+    problem = _swerling(solve=SECANT)
     E, events = radar_objective(kind="auto", draws=4), []
     assert E.estimator_kind == "straight-through"
     result = ds.optimise(problem, E=E, figures=False, on_evaluation=events.append)
@@ -146,7 +150,7 @@ def test_under_straight_through_the_sweep_reads_e_soft_off_e_ref_and_every_value
 def test_under_straight_through_the_figures_draw_the_slope_where_the_solve_evaluated_it():
     # E_soft's value is E_ref: the figures read it off the sweep's E_ref, and draw dE/dr at the
     # points the solve evaluated it, without a value-and-gradient program of their own
-    problem, events = _swerling(), []
+    problem, events = _swerling(solve=SECANT), []
     result = ds.optimise(problem, E=radar_objective(kind="auto", draws=4), on_evaluation=events.append)
     assert {e["planned"] for e in events} == {planned_evaluations(problem, sweep_soft=False)}
     assert result.programs_run["figures"]["soft"] == 0
@@ -162,3 +166,15 @@ def test_under_straight_through_the_figures_draw_the_slope_where_the_solve_evalu
 def test_under_straight_through_the_default_steps_are_swept():
     result = ds.optimise(_swerling(steps=None), E=radar_objective(kind="auto", draws=4), figures=False)
     assert [p.r for p in result.solve.sweep] == list(default_steps(20.0, 100.0))  # 20, 36, ..., 100
+
+
+def test_under_a_probabilistic_law_the_answer_is_searched_on_e_ref_values_alone():
+    # method "auto": Brent on E_ref inside the best step's bracket, no gradient program at all
+    problem, events = _swerling(), []
+    result = ds.optimise(problem, E=radar_objective(kind="auto", draws=4), figures=False, on_evaluation=events.append)
+    assert "soft" not in {e["kind"] for e in events}  # the breakdowns' hard programs follow the answer
+    assert result.programs_run["solve"]["soft"] == 0
+    assert result.solve.evaluations["gradient"] == 0 and result.solve.evaluations["objective"] <= 9
+    assert result.reference["E_ref_star"] == min(e["E_m"] for e in events if e["kind"] == "reference")
+    assert {e["planned"] for e in events} == {planned_evaluations(problem, sweep_soft=False)}
+    assert result.config["solve"]["method"] == "auto"

@@ -6,6 +6,7 @@
     argmin, argmin_derivative    dr*/dtheta by the implicit function theorem (optimistix
                                  ImplicitAdjoint, or the explicit formula); zero on a bound
     dense_grid_search, basin_check   the brute-force baseline and its basin cross-check
+    brent_minimise, brent_solve  Brent's bounded minimisation on values; the sweep + Brent search
     hard_grid_solve              the hard estimator's search (no gradient): sweep + inner grid
     Evaluator                    a pure objective compiled once, memoised and counted
     box_solve, BoxConfig         many parameters in a box: Halton sample (or a batched screen), BFGS
@@ -21,6 +22,7 @@ from diffsense.solve._answer import explain, near_optimal
 from diffsense.solve._box import BoxConfig, BoxResult, box_solve
 from diffsense.solve._box_fns import BoxFunctions
 from diffsense.solve._bracketed import BracketedSecant
+from diffsense.solve._brent import brent_minimise, brent_solve
 from diffsense.solve._continuous import LevelResult, SolveConfig, SolveResult, solve
 from diffsense.solve._dense import DenseGrid, basin_check, dense_grid_search
 from diffsense.solve._evaluator import Evaluator
@@ -57,6 +59,8 @@ __all__ = [
     "argmin_derivative",
     "basin_check",
     "box_solve",
+    "brent_minimise",
+    "brent_solve",
     "pareto_front",
     "pareto_sweep",
     "best_step",

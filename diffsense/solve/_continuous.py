@@ -17,6 +17,9 @@ Strategy:
    centimetres over a fraction of a degree); a few hard probes near r* settle it, and a probe is
    only accepted when it is strictly better, so this step never makes the answer worse.
 
+`SolveConfig.method = "brent"` replaces steps 2-4 by Brent's bounded minimisation of the hard
+(answer) objective's values inside the bracket (`_brent.brent_solve`).
+
 E^2 is optimised (the gradient of sqrt is NaN at 0); E = sqrt(E^2) is reported. Every objective
 and gradient evaluation of step 2-3 is counted against `SolveConfig.max_evaluations`.
 """
@@ -27,6 +30,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from diffsense.solve._brent import brent_solve
 from diffsense.solve._levels import (
     Counted,
     e_from_e2,
@@ -92,6 +96,9 @@ def solve(
     """
     lo, hi = check_interval(*interval)
     dtype = outer_dtype(config.dtype)
+    if config.method == "brent":
+        return brent_solve(lambda r: e_hard(host_array(r, dtype)), (lo, hi), steps=steps, sweep_points=sweep_points,
+                           max_evaluations=config.max_evaluations, xtol_rel=config.xtol_rel, answer_name=answer_name)
     taus = tuple(float(t) for t in config.tau_schedule)
     t0 = time.perf_counter()
     if sweep_points is None:
@@ -175,7 +182,7 @@ def _continuation(counted: Counted, r0: float, bracket: tuple[float, float], tau
         if max_steps < 1:
             notes.append(f"budget spent before tau={tau:g}: continuation stopped early")
             break
-        if config.method == "secant":
+        if config.method in ("auto", "secant"):
             r, n, bound, done = level_secant(
                 counted, y, tau, lower, upper, probe, tol, max_steps, config.max_evaluations
             )

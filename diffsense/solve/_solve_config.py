@@ -30,8 +30,12 @@ class SolveConfig:
         max_evaluations: budget of the continuous solve: objective (soft and hard) plus
             gradient evaluations (20 by default).
         dtype: float type of the outer problem (r, tau).
-        method: `secant` (BracketedSecant, warm-started) or `bisection` (a downhill walk from
-            the previous level's answer to a sign change, then halving).
+        method: how the best step's bracket is searched. `secant` (BracketedSecant, warm-started)
+            or `bisection` (a downhill walk from the previous level's answer to a sign change,
+            then halving): roots of the soft dE^2/dr, a temperature level at a time. `brent`:
+            Brent's bounded minimisation on the answer objective's values, no gradient and no
+            levels (`_brent`). `auto` (default): `brent` where the answer objective is E_ref
+            (a probabilistic detection law; the one-parameter job decides), else `secant`.
         hard_polish: most hard evaluations of the final compass search around r* (0: none);
             it only uses what the budget has left after the soft levels.
         reserve_polish: the soft levels leave `hard_polish` evaluations of the budget unspent, so
@@ -52,7 +56,7 @@ class SolveConfig:
     xtol_rel: float = 1e-3
     max_evaluations: int = 20
     dtype: Literal["float64", "float32"] = "float64"
-    method: Literal["secant", "bisection"] = "secant"
+    method: Literal["auto", "brent", "secant", "bisection"] = "auto"
     hard_polish: int = 6
     reserve_polish: bool = False
 
@@ -73,6 +77,8 @@ class SolveConfig:
         # One gradient for the first level, the reserve of every later one, and the final
         # hard and soft evaluations of the answer.
         least = 1 + RESERVE_PER_LEVEL * (len(taus) - 1) + 2 + self._polish_reserve
+        if self.method == "brent":  # no levels: one value is a search
+            least = 1
         if self.max_evaluations < least:
             raise InputError(
                 f"max_evaluations {self.max_evaluations} is too small for "

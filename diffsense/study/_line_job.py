@@ -14,6 +14,7 @@ from diffsense.metrics import Objective, is_deterministic
 from diffsense.runtime import CompileClock
 from diffsense.solve import (
     Evaluator,
+    SolveConfig,
     default_steps,
     hard_grid_solve,
     near_optimal,
@@ -32,7 +33,7 @@ Progress = Callable[[str], None]
 def planned_evaluations(problem: Problem, sweep_soft: bool = True) -> int:
     """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check).
     `sweep_soft` False: the sweep reads E_soft off its E_ref (straight-through under a
-    probabilistic law), one program per step instead of two."""
+    probabilistic law, or Brent on E_ref's values), one program per step instead of two."""
     (lo, hi), = problem.params.values()
     solver = problem.solver
     steps = len(solver.steps) if solver.steps is not None else len(default_steps(lo, hi))
@@ -48,7 +49,8 @@ def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progr
         "variants; ground-truth predictions")
     E = objective(problem, predictor=predictor) if E is None else E
     # the figures draw E_soft's slope at the sweep's steps, except where E_soft is E_ref (`curves`)
-    planned = planned_evaluations(problem, sweep_soft=not _soft_value_is_e_ref(E))
+    by_values = _resolved(problem.solver.solve, is_deterministic(E.sensor)).method == "brent"
+    planned = planned_evaluations(problem, sweep_soft=not (by_values or _soft_value_is_e_ref(E)))
 
     def counted(kind: str, e_m: float, tau: float) -> None:
         if on_evaluation is not None:
@@ -70,7 +72,7 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
     """The sweep and the continuous solve (the inner hard grid for the hard estimator) of a
     one-parameter problem, the answer judged on E_hard or, under a probabilistic law, E_ref."""
     (_, (lo, hi)), = problem.params.items()
-    steps, config = problem.solver.steps, problem.solver.solve
+    steps, config = problem.solver.steps, _resolved(problem.solver.solve, on_hard)
     if problem.question.estimator.kind == "hard":
         return hard_grid_solve(ev.e_hard, (lo, hi), steps=steps, max_evaluations=config.max_evaluations)
     e2_soft, e_hard = ev.solver_fns(jnp.float64 if config.dtype == "float64" else jnp.float32)
@@ -80,6 +82,15 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
     return solve(e2_soft, e_answer, (lo, hi), steps=steps, config=config,
                  value_and_grad=ev.host_value_and_grad, answer_name="E_hard" if on_hard else "E_ref",
                  soft_value_is_answer=_soft_value_is_e_ref(ev.objective))
+
+
+def _resolved(config: SolveConfig, on_hard: bool) -> SolveConfig:
+    """The solve settings with method "auto" made concrete: Brent on E_ref's values where the
+    answer is E_ref (a probabilistic law), the secant continuation on the soft objective where
+    it is E_hard (the threshold law)."""
+    if config.method != "auto":
+        return config
+    return dataclasses.replace(config, method="secant" if on_hard else "brent")
 
 
 def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures: bool, say: Progress,
