@@ -16,8 +16,7 @@ from diffsense.study._box_job import optimise_box
 from diffsense.study._line_job import Progress, optimise_line
 from diffsense.study._problem import Problem
 from diffsense.study._result import Result
-from diffsense.study._sensitivity import check_theta
-from diffsense.study._sensitivity import sensitivity as implicit
+from diffsense.study._sensitivity import check_theta, sensitivities
 
 
 def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = None, figures: bool = True,
@@ -53,6 +52,8 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         return optimise_box(problem, E, predictor, say, on_evaluation, judge)
     out, E = optimise_line(problem, E, predictor, figures, say, on_evaluation, judge)
     if sensitivity:
-        say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)} (implicit function theorem)")
-        out = dataclasses.replace(out, sensitivity=implicit(problem, out, sensitivity, E=E))
+        say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)}")
+        values, notes = sensitivities(problem, out, sensitivity, E=E)
+        solved = dataclasses.replace(out.solve, notes=(*out.solve.notes, *notes))
+        out = dataclasses.replace(out, sensitivity=values, solve=solved)
     return out
