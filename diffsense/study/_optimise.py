@@ -52,7 +52,9 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
         return optimise_box(problem, E, predictor, say, on_evaluation, judge)
     out, E = optimise_line(problem, E, predictor, figures, say, on_evaluation, judge)
     if sensitivity:
-        say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)}")
+        how = ("re-solving on E_ref at theta -+ delta, about 36 evaluations each"
+               if (out.reference or {}).get("answer_on") == "E_ref" else "implicit function theorem")
+        say(f"{problem.sensor_kind}: dr*/dtheta for {', '.join(sensitivity)} ({how})")
         values, notes = sensitivities(problem, out, sensitivity, E=E)
         solved = dataclasses.replace(out.solve, notes=(*out.solve.notes, *notes))
         out = dataclasses.replace(out, sensitivity=values, solve=solved)
