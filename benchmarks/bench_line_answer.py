@@ -132,7 +132,8 @@ def render(markdown: Path, res: dict) -> None:
     if start not in text or end not in text:
         raise SystemExit(f"error: {markdown} has no {start} ... {end} block")
     load = res["meta"]["load_before"][0], res["meta"]["load_after"][0]
-    body = "\n".join(table(res) + ["", f"Measured with `python benchmarks/bench_line_answer.py` "
+    body = "\n".join(table(res) + ["", "Programs are counted, not timed. Measured with "
+                                   f"`python benchmarks/bench_line_answer.py` "
                                    f"(load {load[0]:.1f} -> {load[1]:.1f} on {res['meta']['cpus']} cores)."])
     head, rest = text.split(start, 1)
     markdown.write_text(f"{head}{start}\n{body}\n{end}{rest.split(end, 1)[1]}")
