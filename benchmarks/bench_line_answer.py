@@ -41,8 +41,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import diffsense as ds  # noqa: E402
-from diffsense.solve import Evaluator, SolveConfig  # noqa: E402
-from diffsense.solve._brent import brent_minimise  # noqa: E402
+from diffsense.solve import Evaluator, SolveConfig, brent_minimise  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 METHODS = ("brent", "secant", "brent-whole")
@@ -88,11 +87,12 @@ def _whole(ev: Evaluator, lo: float, hi: float, xtol: float, budget: int) -> dic
 
 
 def compare(lo: float, hi: float, args) -> dict:
+    load = os.getloadavg()
     problem = ds.Problem(sensor="radar", params={"hfov_deg": (lo, hi)})
     E = ds.objective(problem)
     ev = Evaluator(E)
     t = time.perf_counter()
-    grid = [lo + i * args.dense_step for i in range(int(round((hi - lo) / args.dense_step)) + 1)]
+    grid = [lo + i * args.dense_step for i in range(round((hi - lo) / args.dense_step) + 1)]
     dense = [(ev.e_reference(r), r) for r in grid]
     e_best, r_best = min(dense)
     out = {"interval": [lo, hi], "dense": {"step": args.dense_step, "points": len(grid), "r_best": r_best,
@@ -109,6 +109,7 @@ def compare(lo: float, hi: float, args) -> dict:
         run["gap_pct"] = 100.0 * (run["E_ref_star"] / e_best - 1.0)
         run["programs_to_within_0p1pct"] = _first_within(run.pop("values"), target)
         out["methods"][method] = run
+    out["load"] = [load[0], os.getloadavg()[0]]  # each interval's own: a re-run keeps the others'
     return out
 
 
@@ -131,10 +132,11 @@ def render(markdown: Path, res: dict) -> None:
     start, end = "<!-- line-answer-table -->", "<!-- /line-answer-table -->"
     if start not in text or end not in text:
         raise SystemExit(f"error: {markdown} has no {start} ... {end} block")
-    load = res["meta"]["load_before"][0], res["meta"]["load_after"][0]
+    loads = [iv.get("load", [res["meta"]["load_before"][0], res["meta"]["load_after"][0]]) for iv in res["intervals"]]
+    load = min(a for a, _ in loads), max(b for _, b in loads)
     body = "\n".join(table(res) + ["", "Programs are counted, not timed. Measured with "
                                    f"`python benchmarks/bench_line_answer.py` "
-                                   f"(load {load[0]:.1f} -> {load[1]:.1f} on {res['meta']['cpus']} cores)."])
+                                   f"(load {load[0]:.1f}-{load[1]:.1f} on {res['meta']['cpus']} cores)."])
     head, rest = text.split(start, 1)
     markdown.write_text(f"{head}{start}\n{body}\n{end}{rest.split(end, 1)[1]}")
     print(f"rendered the table into {markdown}")

@@ -49,7 +49,7 @@ def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progr
         "variants; ground-truth predictions")
     E = objective(problem, predictor=predictor) if E is None else E
     # the figures draw E_soft's slope at the sweep's steps, except where E_soft is E_ref (`curves`)
-    by_values = _resolved(problem.solver.solve, is_deterministic(E.sensor)).method == "brent"
+    by_values = _concrete_method(problem.solver.solve, is_deterministic(E.sensor)).method == "brent"
     planned = planned_evaluations(problem, sweep_soft=not (by_values or _soft_value_is_e_ref(E)))
 
     def counted(kind: str, e_m: float, tau: float) -> None:
@@ -72,7 +72,7 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
     """The sweep and the continuous solve (the inner hard grid for the hard estimator) of a
     one-parameter problem, the answer judged on E_hard or, under a probabilistic law, E_ref."""
     (_, (lo, hi)), = problem.params.items()
-    steps, config = problem.solver.steps, _resolved(problem.solver.solve, on_hard)
+    steps, config = problem.solver.steps, _concrete_method(problem.solver.solve, on_hard)
     if problem.question.estimator.kind == "hard":
         return hard_grid_solve(ev.e_hard, (lo, hi), steps=steps, max_evaluations=config.max_evaluations)
     e2_soft, e_hard = ev.solver_fns(jnp.float64 if config.dtype == "float64" else jnp.float32)
@@ -84,7 +84,7 @@ def _solve_line(ev: Evaluator, problem: Problem, on_hard: bool) -> Any:
                  soft_value_is_answer=_soft_value_is_e_ref(ev.objective))
 
 
-def _resolved(config: SolveConfig, on_hard: bool) -> SolveConfig:
+def _concrete_method(config: SolveConfig, on_hard: bool) -> SolveConfig:
     """The solve settings with method "auto" made concrete: Brent on E_ref's values where the
     answer is E_ref (a probabilistic law), the secant continuation on the soft objective where
     it is E_hard (the threshold law)."""
