@@ -168,7 +168,7 @@ def test_a_float32_objective_runs_in_float32_and_hands_back_float64_gradients():
 def test_the_breakdown_by_scenario_against_numpy():
     E = toy_objective(n=2, instants=2)  # variant 0 is scenario0, variant 1 scenario1
     ev = Evaluator(E)
-    out = ev.breakdown(42.0)
+    out = ev.breakdown(42.0, of_reference=False)  # of E_hard (the toy sensor declares no law)
     sq = np.asarray(ev.hard(42.0).sq_instant, np.float64)  # [N, I]
     for k, name in enumerate(("scenario0", "scenario1")):
         assert out["by_scenario"][name]["E_hard"] == pytest.approx(np.sqrt(sq[k].mean()), rel=1e-9)

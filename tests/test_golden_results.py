@@ -10,7 +10,9 @@ law is now the probabilistic one): choosing it by a sensor config gives the same
 "judged" (the answer judged on a fresh seed) was added to the files after they were stored, from the
 first run that reported it. The box answer was re-stored when the box solve began to check its
 descents' iterates on the hard objective every few steps (`BoxConfig.check_every`): its J fell
-from 1.1452 to 1.1443.
+from 1.1452 to 1.1443. "breakdown_of" and "E_pooled" (what the breakdown is of, and its pooled
+value) were added when the breakdown became that of the value the answer is chosen on, and the box
+result's "tracked", null until then, was filled; every other number stayed as stored.
 """
 
 from __future__ import annotations

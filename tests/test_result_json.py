@@ -19,7 +19,7 @@ from diffsense.study import Result
 
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference",
                "judged", "sweep", "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
-               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain",
+               "objective", "breakdown_of", "E_pooled", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain",
                "sensitivity", "scenarios", "config", "versions")
 PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")  # beside python and diffsense
 
@@ -96,6 +96,10 @@ def test_one_parameter_result_json_key_by_key():
     assert out["notes"] == ["a note"] and out["objective"] == "eq12"
     assert _result(solve=_solve(on_bound=True)).to_json()["on_bound"] is True
     assert out["by_scenario"] == {"sc01": 1.0} and out["by_horizon"] == {"t_s": [1.0]}
+    assert (out["breakdown_of"], out["E_pooled"]) == ("E_hard", None)  # BREAKDOWN holds no pooled E
+    drawn = _result(breakdown=BREAKDOWN | {"E_ref": 3.5}).to_json()  # a breakdown of E_ref's draws
+    assert (drawn["breakdown_of"], drawn["E_pooled"]) == ("E_ref", 3.5)
+    assert _result(breakdown=BREAKDOWN | {"E_hard": 4.1}).to_json()["E_pooled"] == 4.1
     assert out["coverage"] == {"at_instant": 0.5} and out["tracked"] == {"E_tracked": 3.0}
     assert out["near_optimal"] == {"tolerance_m": 0.02} and out["flags"] == ["flat"]
     assert out["domain"] == {"outside": []} and out["sensitivity"] == {"rain_mm_h": {"hfov_deg": 0.1}}

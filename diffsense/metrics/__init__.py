@@ -5,7 +5,7 @@ per-horizon RMSE of both predictions against the true future.
 different vehicle counts pool into one `make_objective` batch.
 """
 
-from diffsense.metrics._breakdown import breakdown, tracked_summary
+from diffsense.metrics._breakdown import breakdown, drawn_breakdown, drawn_tracked_summary, tracked_summary
 from diffsense.metrics._build import (
     PAPER_SCENARIOS,
     SpeedShiftedScenes,
@@ -37,6 +37,7 @@ from diffsense.metrics._estimators import (
 from diffsense.metrics._grad import value_and_grad
 from diffsense.metrics._objective import QUESTIONS, Objective
 from diffsense.metrics._reference import (
+    DrawnParts,
     ReferenceEvaluation,
     is_deterministic,
     reference_draw_margins,
@@ -44,9 +45,9 @@ from diffsense.metrics._reference import (
 )
 
 __all__ = [
-    "COVERAGE_PARTS", "ESTIMATORS", "PAPER_SCENARIOS", "QUESTIONS", "CostModel", "CostTerm", "Estimator",
+    "COVERAGE_PARTS", "ESTIMATORS", "PAPER_SCENARIOS", "QUESTIONS", "CostModel", "CostTerm", "DrawnParts", "Estimator",
     "EstimatorConfig", "HardEvaluation", "Objective", "ObjectiveData", "ReferenceEvaluation", "SensorCost",
-    "SpeedShiftedScenes", "breakdown", "cost_breakdown", "coverage_parts", "is_deterministic", "load_costs",
+    "SpeedShiftedScenes", "breakdown", "cost_breakdown", "drawn_breakdown", "drawn_tracked_summary", "coverage_parts", "is_deterministic", "load_costs",
     "make_cost", "make_objective", "member_costs", "pad_vehicles", "recorded_scenes", "reference_draw_margins", "relaxed_bernoulli",
     "relevance_reach", "safe_sqrt", "simulate_scenes", "speed_shifted_scenes", "tracked_summary", "value_and_grad",
     "with_scenes",

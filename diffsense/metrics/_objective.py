@@ -43,6 +43,7 @@ from diffsense.metrics._coverage import coverage_classes, p_tracked, target_wind
 from diffsense.metrics._datatypes import HardEvaluation, ObjectiveData
 from diffsense.metrics._estimators import EstimatorConfig, straight_through
 from diffsense.metrics._reference import (
+    DrawnParts,
     ReferenceEvaluation,
     declares_random_law,
     detection_events,
@@ -264,8 +265,11 @@ class Objective(eqx.Module):
         `draws`, the draws' indices, defaults to 0 ... K-1. Indices from K on are draws independent
         of E_ref's own: they judge a point chosen on E_ref (a solve's answer, a grid's best)
         without the noise it was chosen on."""
+        sq_true_gt = jnp.sum((self.data.gt_pred - self.data.true_fut) ** 2, axis=-1)
         if is_deterministic(self.sensor):
-            return summarise(self.hard(r).objective[None])
+            h = self.hard(r)
+            return summarise(h.objective[None], DrawnParts(h.sq_instant[None], h.coverage[None], h.sq_error,
+                                                           sq_true_gt, h.sq_true_sensor))
         events = detection_events(self, r)
 
         @jax.checkpoint
@@ -273,10 +277,15 @@ class Objective(eqx.Module):
             us = events.uniforms(self.data.noise_key, draw)
             d = events.combine([(u < p).astype(self.dtype) for p, u in zip(events.p_detect, us)])
             coverage = jax.vmap(coverage_classes)(self._target_window(d))
-            return self._question(self._predict(d), coverage[..., 1])
+            pred = self._predict(d)
+            sq = jnp.sum((pred - self.data.gt_pred) ** 2, axis=-1)  # [N, I, F]
+            sq_true = jnp.sum((pred - self.data.true_fut) ** 2, axis=-1)
+            return self._question(pred, coverage[..., 1]), (jnp.mean(sq, axis=-1), coverage, jnp.mean(sq, axis=1), sq_true)
 
         ids = jnp.arange(self.estimator.reference_draws) if draws is None else jnp.asarray(draws)
-        return summarise(jax.lax.map(one_draw, ids))
+        values, (sq_instant, coverage, sq_error, sq_true) = jax.lax.map(one_draw, ids)
+        return summarise(values, DrawnParts(sq_instant, coverage, jnp.mean(sq_error, axis=0), sq_true_gt,
+                                            jnp.mean(sq_true, axis=0)))
 
     def point(self, values) -> dict[str, Array]:
         """r as a dict from values in the order of `names` (a scalar for one parameter)."""

@@ -43,6 +43,29 @@ MC_STREAM = 0x17
 
 @jax.tree_util.register_dataclass
 @dataclasses.dataclass(frozen=True)
+class DrawnParts:
+    """What the draws' hard evaluations are made of: the pieces E_ref's breakdown is read from
+    (`diffsense.metrics.breakdown`), kept per draw where a part's membership changes with the
+    draw (an instant's coverage class) and averaged over the draws where it does not.
+
+    Attributes:
+        sq_instant: [K, N, I] each draw's squared distance per instant, mean over horizon steps [m^2].
+        coverage: [K, N, I, 3] each draw's coverage classes, 0/1 (`_coverage.py`).
+        sq_error: [N, F] the draws' mean squared distance per variant and horizon step [m^2].
+        sq_true_gt: [N, I, F] the ground-truth-input prediction's squared error against the
+            true future [m^2] (the same in every draw).
+        sq_true_sensor: [N, I, F] the sensor-input prediction's, mean over the draws [m^2].
+    """
+
+    sq_instant: Float[Array, "K N I"]
+    coverage: Float[Array, "K N I 3"]
+    sq_error: Float[Array, "N F"]
+    sq_true_gt: Float[Array, "N I F"]
+    sq_true_sensor: Float[Array, "N I F"]
+
+
+@jax.tree_util.register_dataclass
+@dataclasses.dataclass(frozen=True)
 class ReferenceEvaluation:
     """E_ref at one r, with its Monte-Carlo standard error.
 
@@ -52,6 +75,7 @@ class ReferenceEvaluation:
         e: [] E_ref [m].
         e_se: [] its standard error [m].
         draws: [K] the hard objective of each draw [m^2] (K = 1 for a deterministic law).
+        parts: the draws' pieces its breakdown is read from (None where only the value was kept).
     """
 
     e2: Float[Array, ""]
@@ -59,6 +83,7 @@ class ReferenceEvaluation:
     e: Float[Array, ""]
     e_se: Float[Array, ""]
     draws: Float[Array, " K"]
+    parts: DrawnParts | None = None
 
 
 def is_deterministic(sensor: Any) -> bool:
@@ -141,7 +166,7 @@ def safe_sqrt(x: Array) -> Array:
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
 
 
-def summarise(draws: Float[Array, " K"]) -> ReferenceEvaluation:
+def summarise(draws: Float[Array, " K"], parts: DrawnParts | None = None) -> ReferenceEvaluation:
     """Mean and standard error of the draws' hard objective [m^2], and E_ref [m] with its own."""
     k = draws.shape[0]
     e2 = jnp.mean(draws)
@@ -151,7 +176,7 @@ def summarise(draws: Float[Array, " K"]) -> ReferenceEvaluation:
     positive = e2 > 0
     e = safe_sqrt(e2)
     e_se = jnp.where(positive, e2_se / (2.0 * jnp.where(positive, e, 1.0)), 0.0)
-    return ReferenceEvaluation(e2=e2, e2_se=e2_se, e=e, e_se=e_se, draws=draws)
+    return ReferenceEvaluation(e2=e2, e2_se=e2_se, e=e, e_se=e_se, draws=draws, parts=parts)
 
 
 def reference_draw_margins(objective: Any, r: Any, draws: int) -> Float[Array, "K N T V"]:

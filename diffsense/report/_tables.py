@@ -127,17 +127,21 @@ def comparison_table(
 
 def breakdown_table(result: Mapping[str, Any]) -> str:
     """What E at r* is made of: per scenario and per coverage class, with the shares of instants
-    whose target was detected at the instant, in the window and throughout it."""
+    whose target was detected at the instant, in the window and throughout it (E_ref's parts
+    over its detection draws, with expected shares, where result.json's "breakdown_of" says so)."""
+    of = result.get("breakdown_of") or "E_hard"
     rows = []
     for name, part in (result.get("by_scenario") or {}).items():
         c = part["coverage"]
-        rows.append([name, part["E_hard"], c["at_instant"], c["in_window"], c["throughout"]])
+        rows.append([name, part[of], c["at_instant"], c["in_window"], c["throughout"]])
     c = result.get("coverage")
     if not c:
         return ""
-    rows.append(["pooled", result["E_hard_star"], c["at_instant"], c["in_window"], c["throughout"]])
-    parts = ", ".join(f"{k} {v['share']:.0%} of instants, E {_cell(v['E_hard'])} m" for k, v in c["parts"].items())
-    lines = [format_table(["at r*", "E_hard [m]", "seen at t", "in window", "throughout"], rows),
+    pooled = result.get("E_pooled")
+    rows.append(["pooled", result["E_hard_star"] if pooled is None else pooled,
+                 c["at_instant"], c["in_window"], c["throughout"]])
+    parts = ", ".join(f"{k} {v['share']:.0%} of instants, E {_cell(v[of])} m" for k, v in c["parts"].items())
+    lines = [format_table(["at r*", f"{of} [m]", "seen at t", "in window", "throughout"], rows),
              f"by coverage: {parts}"]
     t = result.get("tracked")
     if t:

@@ -11,6 +11,7 @@ its data in as constants.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -21,6 +22,8 @@ import numpy as np
 from diffsense.metrics import (
     ReferenceEvaluation,
     breakdown,
+    drawn_breakdown,
+    drawn_tracked_summary,
     is_deterministic,
     tracked_summary,
     value_and_grad,
@@ -70,6 +73,8 @@ class Evaluator:
         self._soft: dict[tuple, tuple[float, np.ndarray]] = {}
         self._hard: dict[tuple, Any] = {}
         self._reference: dict[tuple, Any] = {}
+        self._drawn_breakdown: dict[tuple, dict[str, Any]] = {}
+        self._scenes: tuple[np.ndarray, np.ndarray] | None = None
         self.reference_count = 0  # reference programs run (each K hard passes for a random law)
         self._progress = progress
 
@@ -102,13 +107,41 @@ class Evaluator:
                 self._progress("hard", float(np.sqrt(max(float(self._hard[key].e2), 0.0))), 0.0)
         return self._hard[key]
 
-    def breakdown(self, x) -> dict[str, Any]:
-        """E_hard at x broken down by scenario, horizon step and coverage, with the "tracked"
-        question's figures pooled (`"tracked"`) and per scenario; layout of result.json's."""
+    def breakdown(self, x, of_reference: bool = True) -> dict[str, Any]:
+        """E at x broken down by scenario, horizon step and coverage, with the "tracked"
+        question's figures pooled (`"tracked"`) and per scenario; layout of result.json's.
+
+        Under a probabilistic law and `of_reference`, the breakdown of E_ref over its detection
+        draws (keys "E_ref"; read from the reference evaluation, no program of its own);
+        otherwise of E_hard, each detection at its median (keys "E_hard")."""
+        if of_reference and not _deterministic(self.objective):
+            self.reference(x)
+            if self._key(x) in self._drawn_breakdown:  # an objective of ours (a custom one keeps no draws)
+                return self._drawn_breakdown[self._key(x)]
         E, hard = self.objective, self.hard(x)
-        scenario, weight = to_host((E.data.scenario, E.data.weight))
+        scenario, weight = self._scene_weights()
         out = breakdown(hard, scenario, weight, E.scenario_names, E.spec.horizon_s())
         return out | {"tracked": tracked_summary(hard, weight, float(E.miss_penalty_m2))}
+
+    def _scene_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each variant's scenario index and weight, on the host (fetched once)."""
+        if self._scenes is None:
+            E = self.objective
+            self._scenes = to_host((E.data.scenario, E.data.weight))
+        return self._scenes
+
+    def _keep_reference(self, key: tuple, ref: ReferenceEvaluation) -> None:
+        """Memoise a reference evaluation: its value, and its draws' breakdown in place of the
+        draws' arrays (a few MB a point that a dense grid would otherwise keep by the hundred)."""
+        if getattr(ref, "parts", None) is None:  # a custom objective's: its value alone
+            self._reference[key] = ref
+            return
+        E = self.objective
+        scenario, weight = self._scene_weights()
+        self._drawn_breakdown[key] = (
+            drawn_breakdown(ref.parts, scenario, weight, E.scenario_names, E.spec.horizon_s())
+            | {"tracked": drawn_tracked_summary(ref.parts, weight, float(E.miss_penalty_m2))})
+        self._reference[key] = dataclasses.replace(ref, parts=None)
 
     def reference(self, x):
         """The reference evaluation (`ReferenceEvaluation`, numpy leaves) at x: E_ref and its
@@ -123,7 +156,7 @@ class Evaluator:
                                                        draws=e2[None])
         if key not in self._reference:
             self.reference_count += 1
-            self._reference[key] = to_host(call(_reference, self.objective, self._array(key)))
+            self._keep_reference(key, to_host(call(_reference, self.objective, self._array(key))))
             if self._progress:
                 self._progress("reference", float(self._reference[key].e), 0.0)
         return self._reference[key]

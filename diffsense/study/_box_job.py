@@ -19,13 +19,12 @@ import numpy as np
 
 from diffsense.metrics import (
     Objective,
-    breakdown,
     is_deterministic,
     load_costs,
     make_cost,
     member_costs,
 )
-from diffsense.runtime import CompileClock, InputError, to_host
+from diffsense.runtime import CompileClock, InputError
 from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, pareto_sweep
 from diffsense.study._domain import domain_check, domain_note
 from diffsense.study._judge import judged
@@ -108,8 +107,8 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         config = dataclasses.replace(problem.solver.box, cost_weight=problem.question.cost_weight, seed=problem.seed)
         box = box_solve(fns, problem.params, config, extra_starts=[start])
         x = [box.x_star[n] for n in E.names]
-        parts = {"breakdown": breakdown(ev.hard(x), *to_host((E.data.scenario, E.data.weight)),
-                                        E.scenario_names, E.spec.horizon_s())}
+        star = ev.breakdown(x, of_reference=not _on_hard(problem, E))
+        parts = {"breakdown": star, "tracked": star["tracked"]}
         fresh = None
         if judge:
             say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")

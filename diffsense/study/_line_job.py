@@ -113,7 +113,7 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
             f"{'E_hard' if on_hard else 'E_ref'}(r*) = {result.E_hard_star:.4f} m")
         curves = report.curves(ev, E, result, lo, hi, solver.extra_curve_points, hard_only,
                                _soft_value_is_e_ref(E)) if figures else None
-        parts = report.breakdowns(ev, E, result, problem.question.miss_penalty_m2)
+        parts = report.breakdowns(ev, result, on_hard)
         fresh = None
         if judge:
             say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")

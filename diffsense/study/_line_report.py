@@ -10,7 +10,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from diffsense.metrics import Objective, breakdown, tracked_summary
+from diffsense.metrics import Objective
 from diffsense.runtime import call, to_host
 from diffsense.scene import ROLE_NAMES
 from diffsense.solve import Evaluator, basin_check, dense_grid_search
@@ -60,15 +60,12 @@ def curves(ev: Evaluator, E: Objective, result, lo: float, hi: float, extra: int
                   timeline_roles=tuple(ROLE_NAMES[int(first.role[v])] for v in cols), dt_s=float(first.dt_s))
 
 
-def breakdowns(ev: Evaluator, E: Objective, result, miss_penalty_m2: float) -> dict[str, Any]:
-    """The breakdown at r* and at every sweep step, and the tracked question's pieces at r*."""
-    scenario, weight = to_host((E.data.scenario, E.data.weight))
-
-    def at(r):
-        return breakdown(ev.hard(r), scenario, weight, E.scenario_names, E.spec.horizon_s())
-
-    return {"breakdown": at(result.r_star), "sweep_breakdown": tuple(at(p.r) for p in result.sweep),
-            "tracked": tracked_summary(ev.hard(result.r_star), weight, miss_penalty_m2)}
+def breakdowns(ev: Evaluator, result, on_hard: bool) -> dict[str, Any]:
+    """The breakdown at r* and at every sweep step, and the tracked question's pieces at r*: of
+    the value the answer is chosen on (E_hard, or E_ref over its detection draws)."""
+    star = ev.breakdown(result.r_star, of_reference=not on_hard)
+    return {"breakdown": star, "tracked": star["tracked"],
+            "sweep_breakdown": tuple(ev.breakdown(p.r, of_reference=not on_hard) for p in result.sweep)}
 
 
 def dense_check(ev: Evaluator, result, lo: float, hi: float, step: float) -> dict[str, Any]:

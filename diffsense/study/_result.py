@@ -35,7 +35,12 @@ result.json schema (every key always present; non-finite numbers are written as 
     "tau_schedule"  [number, ...]  temperature multipliers of the continuation, largest first
     "notes"         [string, ...]  why the answer is what it is, when that needs saying
     "objective"     string   the question E answers: "eq12" (every instant) or "tracked"
-    "by_scenario"   {scenario: {"E_hard": m, "coverage": {...}}}   at r* (Eq. 12, hard)
+    "breakdown_of"  "E_ref" | "E_hard"   what "by_scenario", "by_horizon" and "coverage" break
+                             down: the value the answer is chosen on (E_ref over its detection
+                             draws under a probabilistic law, E_hard otherwise); their parts'
+                             values are keyed by it ("E_hard" below reads "E_ref" then)
+    "E_pooled"      m        the breakdown's pooled E (Eq. 12 over every instant, of every draw)
+    "by_scenario"   {scenario: {"E_hard": m, "coverage": {...}}}   at r* (Eq. 12)
     "by_horizon"    {"t_s": [...], "E_hard": [...], "rmse_true_gt": [...], "rmse_true_sensor": [...]}
                              at r*, per horizon step: Eq. 12, and both predictions against the
                              true future (ground-truth input, sensor input) [m]
@@ -81,7 +86,7 @@ from diffsense.solve import SolveResult
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference", "judged", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
-               "objective", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "sensitivity", "scenarios",
+               "objective", "breakdown_of", "E_pooled", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "sensitivity", "scenarios",
                "config", "versions")
 
 
@@ -229,7 +234,7 @@ class Result:
             "bracket": list(s.bracket),
             "tau_schedule": list(s.tau_schedule),
             "notes": list(s.notes),
-            "objective": self.config.get("objective", "eq12"),
+            "objective": self.config.get("objective", "eq12"), **self._breakdown_of(),
             "by_scenario": (self.breakdown or {}).get("by_scenario"),
             "by_horizon": (self.breakdown or {}).get("by_horizon"),
             "coverage": (self.breakdown or {}).get("coverage"),
@@ -246,6 +251,11 @@ class Result:
             out["dense_check"] = self.dense_check
         return plain(out)
 
+    def _breakdown_of(self) -> dict[str, Any]:
+        """result.json's "breakdown_of" and "E_pooled": which value the breakdown is of."""
+        of = "E_ref" if self.breakdown and "E_ref" in self.breakdown else "E_hard"
+        return {"breakdown_of": of, "E_pooled": (self.breakdown or {}).get(of)}
+
     def _box_json(self) -> dict[str, Any]:
         """result.json of a many-parameter (box) solve: the same keys where they apply; "sweep",
         "bracket" and the one-parameter keys are empty or null, and "box" holds the solve."""
@@ -256,7 +266,7 @@ class Result:
             "E_hard_star": self.E_hard_star, "reference": self.reference, "judged": self.judged, "sweep": [], "evaluations": self.evaluations,
             "programs_run": self.programs_run, "wall_s": dict(self.wall_s), "on_bound": self.on_bound,
             "bracket": None, "tau_schedule": list(b.tau_schedule), "notes": list(self.box_notes),
-            "objective": self.config.get("objective", "eq12"),
+            "objective": self.config.get("objective", "eq12"), **self._breakdown_of(),
             "by_scenario": (self.breakdown or {}).get("by_scenario"),
             "by_horizon": (self.breakdown or {}).get("by_horizon"),
             "coverage": (self.breakdown or {}).get("coverage"), "tracked": self.tracked,
