@@ -120,6 +120,10 @@ def run_design(ctx, seed: int, ledger: Ledger) -> None:
     # the screen, the starts' and each level's hard checks, then per BFGS step a value-and-gradient
     # and a share of the iterate's check
     fixed = screen * costs["screen"] + STARTS * (1 + len(levels))
+    if fixed + STARTS * costs["vg"] > ledger.budget:  # not even one step of each start: no equal budget
+        raise SystemExit(f"error: a budget of {ledger.budget:g} values is below the design solve's fixed cost at "
+                         f"d = {d} ({fixed + STARTS * costs['vg']:.0f}: its screen, starts, checks and one step "
+                         f"each); raise --budget-per-dim")
     soft = max(0, int((ledger.budget - fixed) / (costs["vg"] + 1.0 / every)) - STARTS)
     config = BoxConfig(screen_points=screen, screen_draws=SCREEN_DRAWS, starts=STARTS, tau_schedule=levels,
                        max_soft=soft, max_steps=30, cost_weight=ctx["lam"], seed=seed, **ctx.get("box", {}))
