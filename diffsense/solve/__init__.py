@@ -19,7 +19,8 @@ sensors' documented temperatures, larger is smoother) and `e_hard(r) -> E [m]`, 
 """
 
 from diffsense.solve._answer import explain, near_optimal
-from diffsense.solve._box import BoxConfig, BoxResult, box_solve
+from diffsense.solve._box import box_solve
+from diffsense.solve._box_config import BoxConfig, BoxResult
 from diffsense.solve._box_fns import BoxFunctions
 from diffsense.solve._bracketed import BracketedSecant
 from diffsense.solve._brent import brent_minimise, brent_solve

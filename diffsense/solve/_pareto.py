@@ -7,7 +7,8 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from diffsense.solve._box import BoxConfig, BoxResult, box_solve
+from diffsense.solve._box import box_solve
+from diffsense.solve._box_config import BoxConfig, BoxResult
 from diffsense.solve._box_fns import BoxFunctions
 
 
