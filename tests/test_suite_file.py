@@ -60,7 +60,7 @@ def test_a_suite_file_gives_members_their_own_constants(tmp_path):
     ('sensors = ["radar"]\nparams = 5\n', "[params] must be a table"),
     ('sensors = ["radar"]\n[params]\n', "[params] must be a table"),
     (GOOD.split("[params]")[0], "no [params]"),
-    ("sensors = [\n", "not valid TOML"),
+    ("sensors = [\n", "malformed TOML"),
     (GOOD + "[sensor_config]\n", "[sensor_config] must be a table"),
     (GOOD.replace("[params]", "sensor_config = 5\n[params]"), "[sensor_config] must be a table"),
     (GOOD + "[sensor_config]\nradar = 3\n", "sensor_config radar must be a TOML path"),

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from diffsense.config._schema import from_dict, parse_toml
-from diffsense.runtime import InputError
+from diffsense.runtime import InputError, read_text_file
 
 C = TypeVar("C")
 
@@ -61,12 +61,7 @@ def load_layers(cls: type[C], shipped: list[str], user: str | Path | None = None
     where = f"configs/{shipped[-1]}"
     if user is not None:
         path = Path(user)
-        try:
-            text = path.read_text()
-        except FileNotFoundError:
-            raise InputError(f"config file not found: {path}") from None
-        except (OSError, UnicodeDecodeError) as e:
-            raise InputError(f"cannot read config {path}: {e.strerror if isinstance(e, OSError) else e}") from None
+        text = read_text_file(path, "config file")
         data, where = merge(data, parse_toml(text, str(path))), str(path)
     try:
         return from_dict(cls, data)

@@ -19,7 +19,7 @@ import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
-from diffsense.runtime import InputError
+from diffsense.runtime import InputError, read_text_file
 
 C = TypeVar("C")
 
@@ -131,23 +131,57 @@ def replace(config: C, **changes: Any) -> C:
     return from_dict(type(config), merged)
 
 
+MAX_TOML_DEPTH = 32  # nested arrays and inline tables; the shipped configs nest 2 deep
+
+
+def _nesting(text: str) -> int:
+    """The deepest nesting of TOML arrays and inline tables in `text` (strings and comments
+    skipped), counted before parsing: tomllib recurses once per level."""
+    depth = deepest = 0
+    i, n = 0, len(text)
+    while i < n:
+        ch = text[i]
+        if ch == "#":
+            i = text.find("\n", i)
+            i = n if i < 0 else i
+        elif ch in "\"'":
+            quote = text[i:i + 3] if text[i:i + 3] in ('"""', "'''") else ch
+            i += len(quote)
+            while i < n and not text.startswith(quote, i):
+                i += 2 if ch == '"' and text[i] == "\\" else 1
+            i += len(quote) - 1
+        elif ch in "[{" and (ch == "{" or depth or _in_value(text, i)):
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}" and depth:
+            depth -= 1
+        i += 1
+    return deepest
+
+
+def _in_value(text: str, i: int) -> bool:
+    """Whether the "[" at i opens an array (after "=") rather than a table header."""
+    line_start = text.rfind("\n", 0, i) + 1
+    return "=" in text[line_start:i]
+
+
 def parse_toml(text: str, source: str) -> dict[str, Any]:
-    """Parse TOML text, turning a syntax error into one `InputError` line naming `source`."""
+    """Parse TOML text, turning a syntax error into one `InputError` line naming `source`; nesting
+    deeper than MAX_TOML_DEPTH is refused before parsing."""
+    if _nesting(text) > MAX_TOML_DEPTH:
+        raise InputError(f"{source}: TOML nested more than {MAX_TOML_DEPTH} levels deep")
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"{source}: malformed TOML: {e}") from None
+    except RecursionError:  # a nesting the count above missed: still one line, never a traceback
+        raise InputError(f"{source}: TOML nested too deeply") from None
 
 
 def load(cls: type[C], path: str | Path) -> C:
     """Load a config dataclass from a TOML file; every error names the file."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise InputError(f"config file not found: {path}") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"cannot read config {path}: {e}") from None
+    text = read_text_file(path, "config file")
     try:
         return from_dict(cls, parse_toml(text, str(path)))
     except InputError as e:

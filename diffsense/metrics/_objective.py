@@ -53,6 +53,7 @@ from diffsense.metrics._reference import (
 )
 from diffsense.metrics._sampling import estimator_samples
 from diffsense.predictors import InputSpec
+from diffsense.runtime import InputError
 from diffsense.sensors import Detections, Sensor, Weather
 from diffsense.tracks import FillPolicy, build_inputs, flatten_instants
 
@@ -140,8 +141,11 @@ class Objective(eqx.Module):
     def _params(self, r: Params) -> dict[str, Array]:
         # r may come at a wider float type than the data (a float64 solver over float32 data):
         # compute at the data's.
-        for name in r:
-            self.sensor.spec(name)
+        if not isinstance(r, Mapping):
+            raise InputError(f"r must be a dict of named parameters (e.g. {{{self.names[0]!r}: ...}}), "
+                             f"got {type(r).__name__}" if self.names else "r must be a dict of named parameters")
+        for name, value in r.items():
+            self.sensor.spec(name).check(value)
         return {k: jnp.asarray(v).astype(self.dtype) for k, v in r.items()}
 
     def detections(self, r: Params, mode: Mode = "hard", tau: float | Array = 1.0) -> Detections:

@@ -161,9 +161,10 @@ def detection_events(objective: Any, r: Any, mode: str = "hard", tau: Any = 1.0)
 
 
 def safe_sqrt(x: Array) -> Array:
-    """sqrt(x) for x >= 0 with a finite gradient at 0 (where sqrt's is infinite)."""
+    """sqrt(x) for x >= 0 with a finite gradient at 0 (where sqrt's is infinite); NaN stays NaN
+    (an E^2 that could not be computed is never reported as the best value, 0)."""
     positive = x > 0
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), jnp.where(jnp.isnan(x), x, 0.0))
 
 
 def summarise(draws: Float[Array, " K"], parts: DrawnParts | None = None) -> ReferenceEvaluation:

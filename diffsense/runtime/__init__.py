@@ -23,12 +23,13 @@ from diffsense.runtime._io import (
     write_json,
 )
 from diffsense.runtime._random import normal, uniform
+from diffsense.runtime._read import read_text_file
 from diffsense.runtime._timing import CompileClock
 from diffsense.runtime._version import __version__
 
 __all__ = [
     "CompileClock", "InputError", "__version__", "abandon_temporaries", "atomic_open", "call",
-    "check_writable", "finite_number", "initialize", "is_writer", "keep_in", "normal", "output_set",
+    "check_writable", "finite_number", "initialize", "is_writer", "keep_in", "normal", "output_set", "read_text_file",
     "register_temporary", "release_temporary", "save_figure", "to_host", "uniform", "write_bytes",
     "write_json",
 ]

@@ -33,6 +33,8 @@ def initialize(coordinator: str | None = None, num_processes: int | None = None,
     for name, var in _ENV.items():
         if given[name] is None and os.environ.get(var):
             given[name] = os.environ[var] if name == "coordinator" else _int(var, os.environ[var])
+    if given["coordinator"] is not None:
+        _check_address(given["coordinator"])
     if given["num_processes"] is not None and given["num_processes"] < 1:
         raise InputError(f"distributed: the process count must be >= 1, got {given['num_processes']}")
     if given["process_id"] is not None and given["num_processes"] is not None and not (
@@ -45,6 +47,14 @@ def initialize(coordinator: str | None = None, num_processes: int | None = None,
                                    process_id=given["process_id"])
     except (RuntimeError, ValueError) as e:
         raise InputError(f"distributed: cannot join the run: {e}") from None
+
+
+def _check_address(address: str) -> None:
+    """Refuse a coordinator address that is not HOST:PORT with a port in 1..65535."""
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise InputError(f"distributed: the coordinator address must be HOST:PORT with a port in 1..65535, "
+                         f"got {address[:80]!r}")
 
 
 def _int(var: str, text: str) -> int:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import shutil
 import signal
@@ -110,9 +111,22 @@ def write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         f.write(data)
 
 
+def strict_json(obj: Any) -> Any:
+    """`obj` with every non-finite float (NaN, +-inf, which JSON cannot hold) as None (null)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [strict_json(v) for v in obj]
+    return obj
+
+
 def write_json(path: str | os.PathLike[str], obj: Any) -> None:
-    """Write `obj` as indented JSON to `path` atomically."""
-    write_bytes(path, (json.dumps(obj, indent=2, sort_keys=False) + "\n").encode())
+    """Write `obj` as indented, strict JSON to `path` atomically: a non-finite number is null,
+    never the `NaN` / `Infinity` that JSON parsers other than Python's refuse."""
+    text = json.dumps(strict_json(obj), indent=2, sort_keys=False, allow_nan=False)
+    write_bytes(path, (text + "\n").encode())
 
 
 def save_figure(fig: Any, path: str | os.PathLike[str], **kwargs: Any) -> None:

@@ -7,10 +7,12 @@ row a user can open in an editor.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -60,14 +62,41 @@ def _fast_numbers(path: Path, numeric: Sequence[str], index: list[int]):
         with warnings.catch_warnings():  # a header-only file: the careful reader refuses it
             warnings.simplefilter("ignore", UserWarning)
             data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=index, dtype=np.float64,
-                              ndmin=2, comments=None)
-    except ValueError:
+                              ndmin=2, comments=None, encoding="utf-8-sig")
+    except (ValueError, UnicodeDecodeError):  # the careful reader names the line
         return None
     rows = data.shape[0]
     # Line numbers are row + 2 only without blank lines; the careful reader counts them otherwise.
     if rows == 0 or not np.all(np.isfinite(data)) or _line_count(path) != rows + 1:
         return None
     return {name: data[:, i] for i, name in enumerate(numeric)}, np.arange(2, rows + 2)
+
+
+def _first_undecodable(path: Path) -> tuple[int, int]:
+    """The file line holding the first byte that is not UTF-8, and that byte (the text reader
+    decodes in blocks, so its own position is not the line's)."""
+    with path.open("rb") as handle:
+        for number, raw in enumerate(handle, start=1):
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                return number, raw[e.start]
+    raise AssertionError("unreachable: the text reader refused bytes that decode line by line")
+
+
+@contextlib.contextmanager
+def _rows(path: Path) -> Iterator[Any]:
+    """A csv reader of `path` (UTF-8, a byte-order mark accepted) whose decoding errors and
+    oversized cells become one `InputError` line naming the file and line."""
+    with path.open(newline="", encoding="utf-8-sig") as handle:
+        reader = csv.reader(handle)
+        try:
+            yield reader
+        except UnicodeDecodeError:
+            line, byte = _first_undecodable(path)
+            raise InputError(f"{path}, line {line}: not UTF-8 text (byte 0x{byte:02x})") from None
+        except csv.Error as e:  # a cell over the csv module's field limit (131,072 characters)
+            raise InputError(f"{path}, line {reader.line_num}: {e}") from None
 
 
 def read_columns(
@@ -84,15 +113,13 @@ def read_columns(
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     columns = list(numeric) + list(text)
-    with path.open(newline="") as handle:
-        reader = csv.reader(handle)
+    with _rows(path) as reader:
         index = _header(path, reader, columns)
     if not text:
         fast = _fast_numbers(path, numeric, index)
         if fast is not None:
             return fast
-    with path.open(newline="") as handle:
-        reader = csv.reader(handle)
+    with _rows(path) as reader:
         next(reader)
         need = max(index) + 1
         cells: list[list[str]] = [[] for _ in columns]

@@ -14,6 +14,7 @@ import math
 from typing import Any, Literal
 
 import jax
+import numpy as np
 
 from diffsense.runtime import InputError
 from diffsense.sensors._mount import MOUNT_DOMAINS
@@ -90,6 +91,22 @@ class ParamSpec:
     def describe(self) -> str:
         left = "(" if self.lower_open else "["
         return f"{left}{self.lower:g}, {self.upper:g}] {self.unit}"
+
+    def check(self, value: Any) -> None:
+        """Refuse (InputError, one line), on the host, a concrete value this parameter cannot
+        take: not one number, not finite, or outside the domain. A traced value passes: it is
+        a solver's, kept in its box by construction."""
+        if isinstance(value, jax.core.Tracer):
+            return
+        try:
+            number = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{self.name} must be a number, got {type(value).__name__}") from None
+        if number.ndim != 0:
+            raise InputError(f"{self.name} must be one number, got an array of shape {number.shape} "
+                             "(vmap over r for many)")
+        if not self.contains(float(number)):
+            raise InputError(f"{self.name} = {float(number):g} is outside its domain {self.describe()}")
 
 
 # Physical domains (not user choices, so they live here rather than in a config). The upper

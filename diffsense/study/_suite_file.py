@@ -34,12 +34,12 @@ member's envelope). A member named twice is two tables of one name, which TOML i
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from diffsense.runtime import InputError
+from diffsense.config import parse_toml
+from diffsense.runtime import InputError, read_text_file
 
 _KEYS = ("sensors", "members", "cost_weight", "description", "params", "sensor_config")
 T = TypeVar("T")
@@ -54,12 +54,7 @@ def _fail(path: Path, message: str) -> InputError:
 
 
 def _read(path: Path) -> dict[str, Any]:
-    if not path.is_file():
-        raise InputError(f"suite {path}: not a file")
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise _fail(path, f"not valid TOML ({e})") from None
+    return parse_toml(read_text_file(path, "suite"), f"suite {path}")
 
 
 def _params(path: Path, table: Any) -> dict[str, tuple[float, float]]:
