@@ -244,7 +244,8 @@ def weights(tmp_path_factory) -> Path:
 def test_a_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["--model", str(weights), "--scenarios", "sc05", "--variants", "1", "--steps", "30,105,180",
-            "--dense-check", "15", "--out", str(out), "--quiet"]
+            "--dense-check", "15", "--sensor-config", "configs/sensors/laws/radar_threshold.toml",
+            "--out", str(out), "--quiet"]
     assert _main(argv, capsys)[0] == 0
     result = json.loads((out / "result.json").read_text())
     assert result["param"] == "hfov_deg" and result["interval"] == [30.0, 180.0] and result["units"] == {"hfov_deg": "deg"}
@@ -253,7 +254,7 @@ def test_a_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
     assert result["evaluations"]["objective"] + result["evaluations"]["gradient"] <= 20
     dense = result["dense_check"]  # 30, 45, ..., 180: 11 hard evaluations
     assert dense["evaluations"] == 11 and dense["step"] == 15.0
-    # The shipped threshold law is deterministic: its reference is E_hard, with no standard error.
+    # The threshold law is deterministic: its reference is E_hard, with no standard error.
     assert dense["E_ref_best_se"] == 0.0 and dense["E_ref_star"] == pytest.approx(result["E_hard_star"], rel=1e-12)
     assert dense["E_ref_best"] <= min(p["E_hard"] for p in result["sweep"]) + 1e-12
     assert sorted(p.name for p in out.iterdir()) == ["detections.png", "manifest.json", "objective.png",

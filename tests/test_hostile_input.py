@@ -6,7 +6,8 @@
 - TOML nested past any config's depth, and paths that are not regular files (a FIFO would block
   the run forever), for `--sensor-config`, `--suite` and `--config`;
 - a coordinator address without a port;
-- long options are never matched by a prefix;
+- long options are never matched by a prefix, and an error line echoing a huge value is cut to a
+  screen;
 - result files are strict JSON (a non-finite number is null, never `Infinity`);
 - the Python API refuses a value E cannot be computed at, and an E^2 that is NaN is not 0.
 """
@@ -137,6 +138,12 @@ def test_a_coordinator_address_without_a_port_is_one_line(tmp_path):
     done, _ = _cli("--distributed", "--coordinator", "garbage", "--num-processes", "2", "--process-id", "0",
                    "--out", str(tmp_path / "out"))
     _refused(done, "HOST:PORT")
+
+
+def test_an_error_line_echoing_a_huge_value_fits_on_a_screen(tmp_path):
+    done, _ = _cli("--scenarios", "x" * 100_000, "--out", str(tmp_path / "out"))
+    _refused(done, "xxx")
+    assert len(done.stderr) < 1000
 
 
 def test_long_options_are_not_matched_by_a_prefix(tmp_path):

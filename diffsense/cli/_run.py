@@ -68,8 +68,14 @@ def _distributed() -> bool:
     return jax.process_count() > 1
 
 
+MAX_ERROR_CHARS = 500  # an error line fits on a screen, whatever value it echoes
+
+
 def _fail(message: str) -> None:
-    print(f"error: {' '.join(message.split())}", file=sys.stderr)
+    line = " ".join(message.split())
+    if len(line) > MAX_ERROR_CHARS:  # the head names the culprit; the rest is the echoed value
+        line = f"{line[:MAX_ERROR_CHARS]}... ({len(line)} characters)"
+    print(f"error: {line}", file=sys.stderr)
     sys.exit(2)
 
 
