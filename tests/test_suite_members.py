@@ -223,8 +223,12 @@ def test_a_two_radar_suite_file_runs_end_to_end_on_the_command_line(tmp_path, ca
     problem = ds.Problem.from_suite(suite)
     assert problem.sensing.sensor == _problem().sensing.sensor  # the file and the mapping: one problem
     small = ["--scenarios", "sc01", "--variants", "1", "--quiet"]
-    code, printed, err = _main(["--suite", str(suite), "--out", str(out), *small], capsys)
+    code, printed, err = _main(["--suite", str(suite), "--out", str(out), *small[:-1]], capsys)
     assert code == 0, err
+    # the line that says what was written lists the set the run published, no more
+    written = json.loads((out / "manifest.json").read_text())["files"]
+    assert f"wrote {out}/: {', '.join(written)}" in err and sorted(p.name for p in out.iterdir()) == sorted(
+        [*written, "manifest.json"])
     (asked,) = toy_optimise
     assert asked.sensing == problem.sensing and asked.question.cost_weight == 0.01
     content = json.loads((out / "result.json").read_text())

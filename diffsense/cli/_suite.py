@@ -51,11 +51,11 @@ def pareto_run(problem: Any, lambdas: tuple[float, ...], out: Path, predictor: A
     and its table printed."""
     import diffsense as ds
     from diffsense import report
-    from diffsense.runtime import output_set
+    from diffsense.runtime import output_set, published_files
 
     with output_set(out) as staging:
         front = ds.pareto(problem, lambdas, predictor=predictor, progress=progress, on_evaluation=progress.evaluation)
         content = report.write_pareto(front, staging)
-    progress(f"wrote {out}/: " + ", ".join(report.PARETO_FILES))
+    progress(f"wrote {out}/: " + ", ".join(published_files(out)))
     print("\n" + report.pareto_table(content))
     return 0

@@ -202,7 +202,7 @@ def main(argv: list[str] | None = None, prog: str = PROG) -> int:
             first = next(iter(results.values()))
             comparison = report.comparison_table(results, unit=first["units"][first["param"]])
             runtime.write_bytes(staging / "comparison.txt", (comparison + "\n").encode())
-    progress(f"wrote {out}/: " + ", ".join(report.RUN_FILES) + (" per sensor, comparison.txt" if comparison else ""))
+    progress(f"wrote {out}/: " + ", ".join(runtime.published_files(out)))
     if out == Path(args.out):  # else a distributed run's worker: process 0 prints and writes
         _print_tables(report, results, comparison)
     return 0

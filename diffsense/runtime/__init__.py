@@ -16,6 +16,7 @@ from diffsense.runtime._io import (
     atomic_open,
     check_writable,
     output_set,
+    published_files,
     register_temporary,
     release_temporary,
     save_figure,
@@ -29,7 +30,7 @@ from diffsense.runtime._version import __version__
 
 __all__ = [
     "CompileClock", "InputError", "__version__", "abandon_temporaries", "atomic_open", "call",
-    "check_writable", "finite_number", "initialize", "is_writer", "keep_in", "normal", "output_set", "read_text_file",
+    "check_writable", "finite_number", "initialize", "is_writer", "keep_in", "normal", "output_set", "published_files", "read_text_file",
     "register_temporary", "release_temporary", "save_figure", "to_host", "uniform", "write_bytes",
     "write_json",
 ]

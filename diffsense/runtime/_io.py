@@ -221,6 +221,12 @@ def _set_files(folder: Path) -> list[str]:
     return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if not p.is_dir())
 
 
+def published_files(out_dir: str | os.PathLike[str]) -> list[str]:
+    """The files of the output set published in `out_dir` (its manifest's list; [] without one):
+    what a run wrote, for the line that says so."""
+    return _previous_files(Path(out_dir))
+
+
 def _previous_files(out: Path) -> list[str]:
     """The files the previous set's manifest lists (only plain relative paths inside `out`)."""
     try:
