@@ -15,6 +15,7 @@ from diffsense.runtime._io import (
     abandon_temporaries,
     atomic_open,
     check_writable,
+    json_ready,
     output_set,
     published_files,
     register_temporary,
@@ -30,7 +31,7 @@ from diffsense.runtime._version import __version__
 
 __all__ = [
     "CompileClock", "InputError", "__version__", "abandon_temporaries", "atomic_open", "call",
-    "check_writable", "finite_number", "initialize", "is_writer", "keep_in", "normal", "output_set", "published_files", "read_text_file",
+    "check_writable", "finite_number", "initialize", "is_writer", "json_ready", "keep_in", "normal", "output_set", "published_files", "read_text_file",
     "register_temporary", "release_temporary", "save_figure", "to_host", "uniform", "write_bytes",
     "write_json",
 ]

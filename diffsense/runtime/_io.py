@@ -24,7 +24,7 @@ import shutil
 import signal
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path, PurePosixPath
 from typing import Any, BinaryIO
 
@@ -111,21 +111,26 @@ def write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
         f.write(data)
 
 
-def strict_json(obj: Any) -> Any:
-    """`obj` with every non-finite float (NaN, +-inf, which JSON cannot hold) as None (null)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: strict_json(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [strict_json(v) for v in obj]
-    return obj
+def json_ready(value: Any) -> Any:
+    """`value` as strict JSON can hold it: tuples to lists, numpy / jax scalars and arrays to
+    Python, every non-finite float (NaN, +-inf) to None (null); another type is a TypeError."""
+    if isinstance(value, Mapping):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if hasattr(value, "tolist"):  # numpy / jax arrays and scalars
+        return json_ready(value.tolist())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    raise TypeError(f"cannot write {type(value).__name__} to JSON")
 
 
 def write_json(path: str | os.PathLike[str], obj: Any) -> None:
     """Write `obj` as indented, strict JSON to `path` atomically: a non-finite number is null,
     never the `NaN` / `Infinity` that JSON parsers other than Python's refuse."""
-    text = json.dumps(strict_json(obj), indent=2, sort_keys=False, allow_nan=False)
+    text = json.dumps(json_ready(obj), indent=2, sort_keys=False, allow_nan=False)
     write_bytes(path, (text + "\n").encode())
 
 

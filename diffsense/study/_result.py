@@ -73,14 +73,12 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.metadata
-import math
 import platform
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from diffsense.runtime import __version__
+from diffsense.runtime import __version__, json_ready
 from diffsense.solve import SolveResult
 
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
@@ -100,21 +98,6 @@ def versions() -> dict[str, str]:
             out[name] = "not installed"
     out["diffsense"] = __version__
     return out
-
-
-def plain(value: Any) -> Any:
-    """JSON-ready: tuples to lists, numpy scalars to Python, non-finite floats to None."""
-    if isinstance(value, Mapping):
-        return {str(k): plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [plain(v) for v in value]
-    if hasattr(value, "tolist"):  # numpy / jax arrays and scalars
-        return plain(value.tolist())
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if value is None or isinstance(value, (bool, int, str)):
-        return value
-    raise TypeError(f"cannot write {type(value).__name__} to JSON")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -249,7 +232,7 @@ class Result:
         }
         if self.dense_check is not None:
             out["dense_check"] = self.dense_check
-        return plain(out)
+        return json_ready(out)
 
     def _breakdown_of(self) -> dict[str, Any]:
         """result.json's "breakdown_of" and "E_pooled": which value the breakdown is of."""
@@ -279,4 +262,4 @@ class Result:
         }
         if self.member_costs is not None:  # the cost per member [currency]
             out["box"]["cost_by_member"] = dict(self.member_costs)
-        return plain(out)
+        return json_ready(out)
