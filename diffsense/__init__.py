@@ -13,26 +13,49 @@ Packages, data flowing one way (docs/architecture.md):
 with `runtime` (and `config`) beneath them all.
 """
 
+import importlib
+import importlib.util
+import os
+import signal
 import sys
 import types
+from typing import TYPE_CHECKING
 
-from diffsense import predictors, sensors
-from diffsense.metrics import Objective
-from diffsense.runtime import InputError, __version__
-from diffsense.study import (
-    ParetoFront,
-    Problem,
-    Result,
-    objective,
-    optimise,
-    pareto,
-    sensitivity,
-)
+if TYPE_CHECKING:
+    from diffsense import predictors, sensors
+    from diffsense.metrics import Objective
+    from diffsense.runtime import InputError, __version__
+    from diffsense.study import ParetoFront, Problem, Result, objective, optimise, pareto, sensitivity
+
+# Each public name -> the package it comes from. They are imported on first use (PEP 562), so
+# `import diffsense` costs milliseconds and a command installs its signal handlers (below)
+# before JAX is imported, which takes seconds.
+_EXPORTS = {
+    "InputError": "diffsense.runtime", "__version__": "diffsense.runtime", "Objective": "diffsense.metrics",
+    **dict.fromkeys(["ParetoFront", "Problem", "Result", "objective", "optimise", "pareto", "sensitivity"],
+                    "diffsense.study"),
+}
 
 __all__ = [
     "InputError", "Objective", "ParetoFront", "Problem", "Result", "__version__", "objective", "optimise",
     "pareto", "predictors", "sensitivity", "sensors",
 ]
+
+
+def __getattr__(name: str) -> object:
+    """A public name, or a stage package (`ds.metrics`), imported when first asked for."""
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    elif not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        value = importlib.import_module(f"{__name__}.{name}")
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    setattr(sys.modules[__name__], name, value)
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
 
 
 class _Package(types.ModuleType):
@@ -47,3 +70,35 @@ class _Package(types.ModuleType):
 
 
 sys.modules[__name__].__class__ = _Package
+
+_CONSOLE_SCRIPTS = ("diffsense", "diffsense-optimise")  # pyproject.toml's [project.scripts]
+_ENDINGS = {signal.SIGINT: ("interrupted", 130), signal.SIGTERM: ("terminated", 143)}
+
+
+def _a_command_starts() -> bool:
+    """Whether this process is a diffsense command: `python -m diffsense.X` (the interpreter sets
+    argv[0] to "-m" while it imports the packages of the module it runs) or a console script."""
+    if sys.argv[:1] == ["-m"]:
+        args = list(getattr(sys, "orig_argv", []))
+        for flag, following in zip(args, [*args[1:], ""]):
+            if flag.startswith("-m"):
+                return (following if flag == "-m" else flag[2:]).startswith(f"{__name__}.")
+        return False
+    return bool(sys.argv) and os.path.basename(sys.argv[0]) in _CONSOLE_SCRIPTS
+
+
+def _end_at_once(signum: int, _frame: object) -> None:
+    """Until a command's `run` (diffsense.cli) takes over, nothing is written: end with the line."""
+    line, code = _ENDINGS[signum]
+    os.write(2, f"{line}\n".encode())
+    os._exit(code)
+
+
+# A command handles SIGINT and SIGTERM from its first moment, before JAX is imported: this module
+# runs before any other of the package (`python -m diffsense.scene` imports the stage before its
+# __main__), so they are installed here, in a command's process only; a library user's process
+# keeps its own. An inherited SIG_IGN is overridden too: a signal sent to a run is a request to
+# stop it, whether or not a shell started the run in the background (docs/cli.md).
+if _a_command_starts():
+    for _signum in _ENDINGS:
+        signal.signal(_signum, _end_at_once)

@@ -26,11 +26,9 @@ MANIFEST = "manifest.json"
 # the middle of an output set, or in the middle of one atomic file.
 SCRIPT = textwrap.dedent(
     """
-    import os, sys, time, types
+    import sys, time
     from pathlib import Path
-    package = types.ModuleType("diffsense")  # the packages under test without diffsense/__init__.py
-    package.__path__ = [os.path.join(sys.argv[3], "diffsense")]  # (the stages: seconds per child)
-    sys.modules["diffsense"] = package
+    sys.path.insert(0, sys.argv[3])  # the package under test
     from diffsense import runtime
     from diffsense.cli import run
 

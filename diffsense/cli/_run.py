@@ -7,7 +7,8 @@ Only CLI modules import this. `run(main)` calls `main()` and keeps these promise
 - SIGINT (Ctrl-C), at any moment, prints the one line `interrupted` and exits 130; SIGTERM prints
   `terminated` and exits 143 (128 + the signal number, as a shell reports a signal); neither leaves
   a temporary file, staging folder or half-published output set behind (`diffsense.runtime`'s
-  output sets).
+  output sets). Before `run` starts, a command's start-up is covered by the handlers `import
+  diffsense` installs in a command's process (`diffsense/__init__.py`): the same line and code.
 
 Why not KeyboardInterrupt: a Ctrl-C that lands while JAX runs a host callback
 (`jax.pure_callback`) raises inside the callback, and XLA re-raises it as a `ValueError` with a
