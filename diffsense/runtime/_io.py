@@ -12,6 +12,7 @@ temporary left behind by an interrupt.
   `abandon_temporaries()` deletes them all for a signal handler about to end the process. The
   registry and every publish share one lock, so that handler (run from another thread, see
   `diffsense.cli.run`) sees either the temporaries or the finished set, never a half-published one.
+  Publications into one folder also take turns across processes (`_lock.folder_lock`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any, BinaryIO
 
 from diffsense.runtime._errors import InputError
+from diffsense.runtime._lock import LOCK_FILE, folder_lock
 
 MANIFEST = "manifest.json"
 _MANIFEST_FORMAT = "diffsense-output-set"
@@ -186,7 +188,9 @@ def output_set(out_dir: str | os.PathLike[str]) -> Iterator[Path]:
     Contract. `with output_set(out) as staging:` yields an empty folder on `out`'s filesystem
     (a hidden `.staging-*` inside `out`: beside it would need `out`'s parent to be writable, which
     fails for `--out /tmp`). Write every output of the run into it, sub-folders allowed. When the
-    block succeeds, the set is published, holding the registry lock and deferring SIGINT/SIGTERM:
+    block succeeds, the set is published, holding the folder's lock (`.diffsense.lock`, which every
+    process publishing into `out` takes, so concurrent runs leave the whole set of the one that
+    published last), then the registry lock, deferring SIGINT/SIGTERM:
     - `out/manifest.json` lists the previous set's files (relative paths); those files, and
       sub-folders they leave empty, are removed: nothing else in `out` is ever touched, so files
       the user keeps there survive, and a folder holds exactly one run's set;
@@ -205,7 +209,9 @@ def output_set(out_dir: str | os.PathLike[str]) -> Iterator[Path]:
         _TEMPORARIES[str(staging)] = "tree"
     try:
         yield staging
-        with _LOCK, _signals_deferred():
+        # The folder's lock first: a signal that arrives while another process publishes still
+        # ends this one at once (the registry lock is free for the handler; nothing has moved).
+        with folder_lock(out), _LOCK, _signals_deferred():
             _publish(staging, out)
             shutil.rmtree(staging, ignore_errors=True)
             for m in made:
@@ -245,8 +251,8 @@ def _previous_files(out: Path) -> list[str]:
 
 def _publish(staging: Path, out: Path) -> None:
     files = _set_files(staging)
-    if MANIFEST in files:
-        raise ValueError(f"an output set cannot contain its own {MANIFEST}")
+    if MANIFEST in files or LOCK_FILE in files:
+        raise ValueError(f"an output set cannot contain its own {MANIFEST} or {LOCK_FILE}")
     for rel in files:
         target = out / rel
         if target.is_dir() and not target.is_symlink():
