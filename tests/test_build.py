@@ -212,14 +212,16 @@ def test_simulated_scenarios_are_pooled_scenario_major_with_their_weather_and_ba
 def test_recorded_scenes_are_each_cut_reduced_at_every_stride_frames(tmp_path):
     """One clear scenario of one variant per cut, named after the whole file name (a colon in it
     too), each cut reduced to the vehicles relevant at its instants every `stride_frames`, in
-    the dtype asked."""
+    the dtype it was cut in."""
     path = write_highd(tmp_path, stem="a:01")
     source = f"highd:{path}"
     for stride, dtype in ((4, jnp.float64), (40, jnp.float32)):
-        scenes, index, names, weather = metrics.recorded_scenes(source, **REACH, stride_frames=stride, dtype=dtype)
+        cut = scene.cut_recorded(source, window_s=20.0, dtype=dtype)
+        scenes, index, names, weather = metrics.recorded_scenes(cut, **REACH, stride_frames=stride)
+        assert scenes.s_m.dtype == dtype
         reach = metrics.relevance_reach(**REACH)
         cuts = [scene.relevant_vehicles(c, prediction_frames(c.num_frames, stride, CSLSTM_SPEC, c.dt_s), **reach)
-                for c in scene.load_recorded(source, dtype=dtype)]
+                for c in scene.load_recorded(source, window_s=20.0, dtype=dtype)]
         width = max(c.num_vehicles for c in cuts)
         _same_scenes(scenes, jax.tree.map(lambda *a: jnp.stack(a), *[metrics.pad_vehicles(c, width) for c in cuts]))
         n = len(cuts)

@@ -12,7 +12,9 @@ first run that reported it. The box answer was re-stored when the box solve bega
 descents' iterates on the hard objective every few steps (`BoxConfig.check_every`): its J fell
 from 1.1452 to 1.1443. "breakdown_of" and "E_pooled" (what the breakdown is of, and its pooled
 value) were added when the breakdown became that of the value the answer is chosen on, and the box
-result's "tracked", null until then, was filled; every other number stayed as stored.
+result's "tracked", null until then, was filled; every other number stayed as stored. The config's
+"window_s" and "crossing_at_s" (the windows cut from recorded scenes) were added with the defaults
+when recorded windows came to fit the data.
 """
 
 from __future__ import annotations

@@ -18,6 +18,13 @@ from diffsense import scene as sc
 from diffsense.runtime import InputError
 
 
+def cut(rec, window_s=20.0, crossing_at_s=5.0, **options):
+    """(scenes, windows) of a recording, by default 20 s windows from 5 s before the crossing (the
+    geometry the expected values below are written for)."""
+    out = sc.recorded_scenes(rec, window_s=window_s, crossing_at_s=crossing_at_s, **options)
+    return out.scenes, out.windows
+
+
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     path = tmp_path_factory.mktemp("recorded")
@@ -29,8 +36,8 @@ def folder(tmp_path_factory):
 @pytest.fixture(scope="module")
 def loaded(folder):
     """(highD scene, highD info, NGSIM scene, NGSIM info) in float64."""
-    (h,), (hi,) = sc.recorded_scenes(sc.read_highd(folder / "01_tracks.csv"), dtype=jnp.float64)
-    (n,), (ni,) = sc.recorded_scenes(sc.read_ngsim(folder / "trajectories.csv"), dtype=jnp.float64)
+    (h,), (hi,) = cut(sc.read_highd(folder / "01_tracks.csv"), dtype=jnp.float64)
+    (n,), (ni,) = cut(sc.read_ngsim(folder / "trajectories.csv"), dtype=jnp.float64)
     return h, hi, n, ni
 
 
@@ -83,7 +90,7 @@ def test_both_formats_give_the_same_scene(loaded):
 
 
 def test_highd_direction_one_is_mirrored(tmp_path, loaded):
-    (m,), _ = sc.recorded_scenes(sc.read_highd(files.write_highd(tmp_path, direction=1)), dtype=jnp.float64)
+    (m,), _ = cut(sc.read_highd(files.write_highd(tmp_path, direction=1)), dtype=jnp.float64)
     h = loaded[0]
     offset = m.s_m - h.s_m  # s is measured from another origin, and grows along travel in both
     np.testing.assert_allclose(offset, offset[0, 0], atol=1e-6)
@@ -93,9 +100,9 @@ def test_highd_direction_one_is_mirrored(tmp_path, loaded):
 
 
 def test_float32_default_and_dispatcher(folder):
-    (h,) = sc.load_highd(folder / "01_tracks.csv")
+    (h,) = sc.load_highd(folder / "01_tracks.csv", window_s=20.0, crossing_at_s=5.0)
     assert h.s_m.dtype == jnp.float32 and h.lane.dtype == jnp.int32
-    (n,) = sc.load_recorded(f"ngsim:{folder / 'trajectories.csv'}")
+    (n,) = sc.load_recorded(f"ngsim:{folder / 'trajectories.csv'}", window_s=20.0, crossing_at_s=5.0)
     np.testing.assert_allclose(n.s_m, h.s_m, atol=2e-3)
     for spec in ("waymo:x.csv", "highd", "ngsim:"):
         with pytest.raises(InputError, match=repr(spec)):
@@ -117,7 +124,7 @@ def test_hysteresis():
 
 def test_ego_falls_back_to_the_original_lane(tmp_path):
     path = files.write_ngsim(tmp_path, drop=(2,))
-    _, (info,) = sc.recorded_scenes(sc.read_ngsim(path))
+    _, (info,) = cut(sc.read_ngsim(path))
     assert info.vehicle_ids[:2] == (3, 1)
     with pytest.raises(InputError, match="noego.csv"):  # no lane change with an ego: no scene
         sc.load_ngsim(files.write_ngsim(tmp_path, drop=(2, 3), name="noego.csv"))
@@ -131,7 +138,7 @@ def test_the_loaders_refuse_in_one_line_naming_the_culprit(tmp_path):
     for call, culprits in ((lambda: sc.load_highd(tracks), (tracks, "line 7", "'x'", "12.5abc")),
                            (lambda: sc.load_ngsim(files.write_ngsim(tmp_path, drop=(1,), name="straight.csv")),
                             ("straight.csv",)),  # no lane change found
-                           (lambda: sc.load_ngsim(path, duration_s=5.0), ("duration_s",))):
+                           (lambda: sc.load_ngsim(path, window_s=5.0), ("window_s",))):
         with pytest.raises(InputError) as e:
             call()
         assert "\n" not in str(e.value) and all(str(c) in str(e.value) for c in culprits), str(e.value)
@@ -147,30 +154,35 @@ def track(vehicle_id, frames, s0, lane_id, metres_per_frame=2.0):
 
 # 10 Hz. The target (id 1) crosses from lane id 2 to 1 at frame 50; the ego (id 2) drives behind
 # it in lane id 1; id 3 is recorded exactly over the 8 s window from 2 s before the crossing
-# (frames 30 to 110), id 4 misses its last frame.
+# (frames 30 to 110), id 4 leaves the view one frame early, after the window's one prediction
+# instant (frame 60), id 5 enters one frame late.
 FRAMES = np.arange(0, 121)
 REC = sc.Recording(path="hand", frame_rate_hz=10.0, tracks=(
     track(1, FRAMES, 40.0, np.where(FRAMES < 50, 2, 1)),
     track(2, FRAMES, 10.0, np.ones_like(FRAMES)),
     track(3, np.arange(30, 111), 0.0, np.full(81, 2)),
     track(4, np.arange(30, 110), 60.0, np.full(80, 1)),
+    track(5, np.arange(31, 111), 80.0, np.full(80, 1)),
 ))
 
 
-def test_a_vehicle_recorded_exactly_over_the_window_is_kept_and_one_frame_short_is_not():
-    (scene,), (info,) = sc.recorded_scenes(REC, duration_s=8.0, crossing_at_s=2.0, dtype=jnp.float64)
-    assert info.vehicle_ids == (2, 1, 3) and (info.start_s, info.crossing_s) == (3.0, 5.0)
-    assert scene.s_m.shape == (81, 3)
-    np.testing.assert_allclose(scene.s_m[:, 2], 2.0 * np.arange(30, 111), rtol=1e-15)
+def test_a_vehicle_leaving_the_view_after_the_last_instant_is_kept_and_one_entering_late_is_not():
+    (scene,), (info,) = cut(REC, window_s=8.0, crossing_at_s=2.0, dtype=jnp.float64)
+    assert info.vehicle_ids == (2, 1, 4, 3) and (info.start_s, info.crossing_s) == (3.0, 5.0)
+    assert scene.s_m.shape == (81, 4)
+    np.testing.assert_allclose(scene.s_m[:, 3], 2.0 * np.arange(30, 111), rtol=1e-15)
+    # Past its last recorded frame, vehicle 4 goes on at its last speed (here its only one).
+    np.testing.assert_allclose(scene.s_m[:, 2], 60.0 + 2.0 * np.arange(30, 111), rtol=1e-15)
+    assert scene.lane[-1, 2] == scene.lane[0, 2]
     for name in ("d_m", "x_m", "y_m", "heading_rad", "road_angle_rad", "speed_mps", "lane"):
-        assert getattr(scene, name).shape == (81, 3), name
+        assert getattr(scene, name).shape == (81, 4), name
 
 
 def test_the_ego_is_strictly_behind_the_target_at_the_windows_first_frame():
     # Vehicle 5, in the lane the target enters, is abreast of it at the window's first frame
     # (frame 30, s = 100 m) and behind it from the next frame on (it drives 1 m a frame, not 2).
     rec = sc.Recording(path="hand", frame_rate_hz=10.0, tracks=(*REC.tracks, track(5, FRAMES, 70.0, np.ones_like(FRAMES), 1.0)))
-    _, (info,) = sc.recorded_scenes(rec, duration_s=8.0, crossing_at_s=2.0, dtype=jnp.float64)
+    _, (info,) = cut(rec, window_s=8.0, crossing_at_s=2.0, dtype=jnp.float64)
     assert info.vehicle_ids[:2] == (2, 1)
 
 

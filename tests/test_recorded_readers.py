@@ -157,7 +157,7 @@ def test_the_loaders_pass_every_window_option_on(tmp_path, kind):
     load, path = (load_ngsim, files.write_ngsim(tmp_path)) if kind == "ngsim" else (load_highd, files.write_highd(tmp_path))
     with pytest.raises(InputError, match="a lane id held 12.0 s after another"):
         load(path, hold_s=12.0)
-    (scene,) = load(path, duration_s=10.0, crossing_at_s=2.0, dtype=jnp.float64)
+    (scene,) = load(path, window_s=10.0, crossing_at_s=2.0, dtype=jnp.float64)
     assert scene.s_m.shape == (101, 5) and scene.s_m.dtype == jnp.float64
     assert scene.lane[:, 1].tolist() == [2] * 20 + [1] * 81  # in the new lane from 2 s on
 

@@ -30,7 +30,7 @@ from diffsense.metrics import ESTIMATORS
 from diffsense.predictors import load_predictor
 from diffsense.runtime import InputError
 from diffsense.scene import check_speed_offset, load_scenario
-from diffsense.study import ODD_PARAMETERS, check_theta, memory_estimate_bytes
+from diffsense.study import ODD_PARAMETERS, check_theta, memory_estimate_bytes, recorded_cut
 
 PROG = "python -m diffsense.optimise"
 
@@ -61,6 +61,12 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
     p.add_argument("--scenes", metavar="KIND:PATH",
                    help="recorded traffic instead of scenarios (not with --scenarios): highd:NN_tracks.csv or "
                    "ngsim:TRAJECTORIES.csv")
+    p.add_argument("--window-s", type=float, metavar="S",
+                   help="with --scenes: the window cut around each lane change [s] (default 10: the predictor's "
+                   "3 s history + 5 s future + 2 s of prediction instants)")
+    p.add_argument("--crossing-at-s", type=float, metavar="S",
+                   help="with --scenes: where in the window the lane change crosses the marking [s from its start] "
+                   "(default: each window placed to fit the recording)")
     p.add_argument("--variants", type=int, help="variants per scenario")
     p.add_argument("--model", help="predictor weights (.msgpack of this project or a PyTorch checkpoint)")
     p.add_argument("--profile", choices=("physical", "paper"),
@@ -115,9 +121,11 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
 
 
 def _check_inputs(problems_: list) -> None:
-    """Every input that can be checked before any computation: scenarios, predictor file."""
+    """Every input that can be checked before any computation: scenarios, a recording (read and
+    cut here, before JAX starts: the run takes the same cut), predictor file."""
     for problem in problems_:
         traffic, model = problem.traffic, problem.prediction.predictor
+        recorded_cut(problem)
         for name in () if traffic.scenes is not None else traffic.scenarios:
             check_speed_offset(load_scenario(name), traffic.traffic_speed_offset_kmh)
         if isinstance(model, str) and model and not Path(model).is_file():

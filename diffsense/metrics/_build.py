@@ -25,9 +25,9 @@ from diffsense.metrics._sharding import shard_leading_axis
 from diffsense.predictors import InputSpec
 from diffsense.runtime import InputError, call
 from diffsense.scene import (
+    RecordedCut,
     ScenarioConfig,
     Scene,
-    load_recorded,
     load_scenario,
     relevant_selection,
     relevant_vehicles,
@@ -146,18 +146,20 @@ def speed_shifted_scenes(
 
 
 def recorded_scenes(
-    source: str, *, spec: InputSpec, sensors: Sequence[Sensor], stride_frames: int = 4, dtype=jnp.float64,
+    cut: RecordedCut, *, spec: InputSpec, sensors: Sequence[Sensor], stride_frames: int = 4,
 ) -> tuple[Scene, np.ndarray, tuple[str, ...], Weather]:
-    """Scenes cut from a recording (`"highd:PATH"` or `"ngsim:PATH"`), each its own scenario of one
-    variant, reduced to their relevant vehicles like simulated ones; clear weather."""
-    cut = load_recorded(source, dtype=dtype)
+    """The scenes of a cut recording (`diffsense.scene.cut_recorded`, cut in `dtype`), each its own
+    scenario of one variant named FILE#i, reduced to their relevant vehicles like simulated ones;
+    clear weather."""
     kept = []
-    for scene in cut:
+    for scene in cut.scenes:
+        # device_put moves the host arrays as they are; jnp.asarray would compile once per scene shape.
+        scene = jax.tree.map(jax.device_put, scene)
         frames = prediction_frames(scene.num_frames, stride_frames, spec, scene.dt_s)
         kept.append(relevant_vehicles(scene, frames, **relevance_reach(spec, sensors)))
     width = max(s.num_vehicles for s in kept)
     batch = _concat_padded(tuple(jax.tree.map(lambda a: a[None], s) for s in kept), width)
-    stem = Path(source.partition(":")[2]).name
+    stem = Path(cut.summary.path).name
     n = len(kept)
     return (batch, np.arange(n), tuple(f"{stem}#{i}" for i in range(n)),
             Weather(rain_mm_h=np.zeros(n), fog_visibility_m=np.full(n, np.inf)))

@@ -34,7 +34,7 @@ from diffsense.scene._lane_change import (
     quintic_lateral_speed_mps,
     quintic_progress,
 )
-from diffsense.scene._load_recorded import load_recorded
+from diffsense.scene._load_recorded import cut_recorded, load_recorded
 from diffsense.scene._mobil import (
     MOBILParams,
     mobil_incentive_mps2,
@@ -42,7 +42,16 @@ from diffsense.scene._mobil import (
     mobil_wants_change,
 )
 from diffsense.scene._ngsim import load_ngsim, read_ngsim
-from diffsense.scene._recorded import Recording, Track, WindowInfo, lane_changes, recorded_scenes
+from diffsense.scene._recorded import check_window, lane_changes, recorded_scenes
+from diffsense.scene._recorded_types import (
+    DEFAULT_WINDOW_S,
+    Dropped,
+    RecordedCut,
+    Recording,
+    RecordingSummary,
+    Track,
+    WindowInfo,
+)
 from diffsense.scene._relevant import (
     MARGIN_M,
     relevant_mask,
@@ -131,8 +140,9 @@ __all__ = [
     "TrafficState", "TrafficTrajectories", "TrafficVehicles", "init_traffic", "lateral_offset_m", "num_steps",
     "simulate_traffic", "traffic_step",
     # recorded traffic (highD, NGSIM)
-    "Recording", "Track", "WindowInfo", "lane_changes", "load_highd", "load_ngsim", "load_recorded",
-    "read_highd", "read_ngsim", "recorded_scenes",
+    "DEFAULT_WINDOW_S", "Dropped", "RecordedCut", "Recording", "RecordingSummary", "Track", "WindowInfo",
+    "check_window", "cut_recorded", "lane_changes", "load_highd", "load_ngsim", "load_recorded", "read_highd", "read_ngsim",
+    "recorded_scenes",
     # the viewer
     "ROLE_COLOURS", "road_json", "scene_figure", "scene_json",
 ]

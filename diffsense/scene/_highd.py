@@ -26,7 +26,8 @@ centre is (x + width / 2, y + height / 2). Direction 2 drives towards +x with it
 the bottom marking y_R: s = x_c, d = y_R - y_c, speed = xVelocity. Direction 1 drives towards -x
 with its right edge at the top marking y_R; it is mirrored so that s grows along travel:
 s = x_ref - x_c with x_ref the largest x + width in the file (so s >= 0), d = y_c - y_R,
-speed = -xVelocity. The lane index (0 = rightmost) counts the markings between the right edge
+speed = -xVelocity. The motion must be plausible (_recorded_checks.py: the frame rate against
+positions and speeds, glitches, speeds, centres on the road). The lane index (0 = rightmost) counts the markings between the right edge
 and the centre; lane changes are read from `laneId`. Frame f is at t = f / frameRate.
 """
 
@@ -39,16 +40,9 @@ import numpy as np
 
 from diffsense.runtime import InputError
 from diffsense.scene._datatypes import CAR, TRUCK, Scene
-from diffsense.scene._recorded import (
-    DEFAULT_CROSSING_AT_S,
-    DEFAULT_DURATION_S,
-    DEFAULT_HOLD_S,
-    Recording,
-    Track,
-    check_window,
-    group_rows,
-    recorded_scenes,
-)
+from diffsense.scene._recorded import check_window, group_rows, recorded_scenes
+from diffsense.scene._recorded_types import DEFAULT_HOLD_S, DEFAULT_WINDOW_S, Recording, Track
+from diffsense.scene._recorded_checks import check_motion, check_road, check_speeds
 from diffsense.scene._recorded_csv import integers, read_columns
 
 _KINDS = {"car": CAR, "truck": TRUCK}
@@ -129,6 +123,9 @@ def read_highd(tracks_csv_path: str | Path) -> Recording:
     s = np.where(lower_lanes, x_c, x_ref - x_c)
     d = np.where(lower_lanes, lower[-1] - y_c, y_c - upper[0])
     speed = np.where(lower_lanes, cols["xVelocity"], -cols["xVelocity"])
+    check_speeds(path, speed, lines)
+    check_motion(path, ids, frame, x_c, y_c, cols["xVelocity"], rate, lines, f"{recording_path.name}'s frameRate")
+    check_road(path, d, np.where(lower_lanes, lower[-1] - lower[0], upper[-1] - upper[0]), lines)
     edges_lower, edges_upper = lower[-1] - lower[::-1], upper - upper[0]  # lane boundaries in d
     lane = np.where(lower_lanes,
                     np.clip(np.searchsorted(edges_lower, d, side="right") - 1, 0, lower.shape[0] - 2),
@@ -145,15 +142,12 @@ def read_highd(tracks_csv_path: str | Path) -> Recording:
 
 
 def load_highd(
-    tracks_csv_path: str | Path, *, duration_s: float = DEFAULT_DURATION_S,
-    crossing_at_s: float = DEFAULT_CROSSING_AT_S, hold_s: float = DEFAULT_HOLD_S, dtype=jnp.float32,
+    tracks_csv_path: str | Path, *, window_s: float = DEFAULT_WINDOW_S, crossing_at_s: float | None = None,
+    hold_s: float = DEFAULT_HOLD_S, dtype=jnp.float32,
 ) -> list[Scene]:
     """One 10 Hz scene per usable lane change of a highD recording (`NN_tracks.csv`; the siblings
     `NN_tracksMeta.csv` and `NN_recordingMeta.csv` are found beside it). See _recorded.py for the
-    windows, the ego and the roles. highD films a short stretch of road, so at motorway speeds
-    few vehicles stay in view for the 20 s default window; a shorter `duration_s` keeps more.
-    """
-    check_window(duration_s, crossing_at_s, hold_s)  # before reading a large file
-    scenes, _ = recorded_scenes(read_highd(tracks_csv_path), duration_s=duration_s,
-                                crossing_at_s=crossing_at_s, hold_s=hold_s, dtype=dtype)
-    return scenes
+    windows, the ego and the roles."""
+    check_window(window_s, crossing_at_s, hold_s)  # before reading a large file
+    cut = recorded_scenes(read_highd(tracks_csv_path), window_s=window_s, crossing_at_s=crossing_at_s, hold_s=hold_s, dtype=dtype)
+    return list(cut.scenes)

@@ -16,6 +16,7 @@ from diffsense.study._members import Member, named_members
 from diffsense.study._objective import (
     memory_estimate_bytes,
     objective,
+    recorded_cut,
     seed_keys,
     traffic_scenes,
 )
@@ -51,5 +52,5 @@ __all__ = [
     "check_lambdas", "check_theta", "checked", "domain_check", "domain_note", "judge_seed", "judging_objective",
     "load_settings", "load_suite",
     "memory_estimate_bytes", "named_members", "objective", "odd_shift", "optimise", "pareto", "planned_evaluations",
-    "problem_config", "problem_fields", "seed_keys", "sensitivity", "shared_fields", "traffic_scenes",
+    "problem_config", "problem_fields", "recorded_cut", "seed_keys", "sensitivity", "shared_fields", "traffic_scenes",
 ]

@@ -29,7 +29,7 @@ from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, paret
 from diffsense.study._domain import domain_check, domain_note
 from diffsense.study._judge import judged
 from diffsense.study._line_report import reference_summary
-from diffsense.study._objective import objective
+from diffsense.study._objective import objective, scenes_line
 from diffsense.study._problem import Problem, problem_config
 from diffsense.study._result import Result
 
@@ -71,10 +71,6 @@ def _on_hard(problem: Problem, E: Objective) -> bool:
     return problem.question.estimator.kind == "hard" or is_deterministic(E.sensor)
 
 
-def _simulating(problem: Problem) -> str:
-    return f"{problem.sensor_kind}: simulating {len(problem.traffic.scenarios)} scenarios x {problem.traffic.variants} variants"
-
-
 def _units(problem: Problem) -> dict[str, str]:
     return {n: s.unit for n, s in problem.sensing.specs.items()}
 
@@ -99,8 +95,8 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
     sample, BFGS with temperature continuation from its best points, every answer checked on the
     hard objective J = E_hard + cost_weight * cost."""
     with CompileClock() as clock:
-        say(_simulating(problem))
-        E = objective(problem, predictor=predictor) if E is None else E
+        say(scenes_line(problem))
+        E = objective(problem, predictor=predictor, progress=say) if E is None else E
         ev, fns, start = _functions(problem, E, on_evaluation)
         domain = domain_check(E, getattr(E.predictor, "validation_rmse_m", None))
         say(f"{problem.sensor_kind}: box solve of {', '.join(problem.params)}")
@@ -197,8 +193,8 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
     lambdas = check_lambdas(lambdas)
     say = progress or (lambda message: None)
     t0 = time.perf_counter()
-    say(_simulating(problem))
-    E = objective(problem, predictor=predictor) if E is None else E
+    say(scenes_line(problem))
+    E = objective(problem, predictor=predictor, progress=say) if E is None else E
     ev, fns, start = _functions(problem, E, on_evaluation, len(lambdas))
     config = dataclasses.replace(problem.solver.box, seed=problem.seed)
     judged_on = "E_hard" if _on_hard(problem, E) else "E_ref"

@@ -23,7 +23,7 @@ from diffsense.solve import (
 from diffsense.study import _line_report as report
 from diffsense.study._domain import domain_check, domain_note
 from diffsense.study._judge import judged
-from diffsense.study._objective import objective
+from diffsense.study._objective import objective, scenes_line
 from diffsense.study._problem import Problem, problem_config
 from diffsense.study._result import Result
 
@@ -45,9 +45,8 @@ def planned_evaluations(problem: Problem, sweep_soft: bool = True) -> int:
 def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progress,
                on_evaluation: Callable[[dict], None] | None, figures: bool) -> tuple[Objective, Evaluator]:
     """The problem's objective (built unless given) and its memoising, counting evaluator."""
-    say(f"{problem.sensor_kind}: simulating {len(problem.traffic.scenarios)} scenarios x {problem.traffic.variants} "
-        "variants; ground-truth predictions")
-    E = objective(problem, predictor=predictor) if E is None else E
+    say(f"{scenes_line(problem)}; ground-truth predictions")
+    E = objective(problem, predictor=predictor, progress=say) if E is None else E
     # the figures draw E_soft's slope at the sweep's steps, except where E_soft is E_ref (`curves`)
     by_values = _concrete_method(problem.solver.solve, is_deterministic(E.sensor)).method == "brent"
     planned = planned_evaluations(problem, sweep_soft=not (by_values or _soft_value_is_e_ref(E)))

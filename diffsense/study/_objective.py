@@ -5,6 +5,9 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -24,8 +27,8 @@ from diffsense.predictors import (
     load_predictor,
     with_compute_dtype,
 )
-from diffsense.runtime import call
-from diffsense.scene import load_scenario
+from diffsense.runtime import InputError, call
+from diffsense.scene import RecordedCut, cut_recorded, load_scenario
 from diffsense.sensors import Weather, relevance_stand_ins
 from diffsense.study._problem import Problem
 from diffsense.study._specs import PredictionSpec
@@ -55,23 +58,59 @@ def _in_dtype(predictor: Any, predictor_dtype: str, dtype) -> Any:
     return with_compute_dtype(predictor, predictor_dtype) if predictor_dtype != jnp.dtype(dtype).name else predictor
 
 
-def objective(problem: Problem, *, predictor: Any = None, min_vehicles: int = 0) -> Objective:
+@functools.lru_cache(maxsize=4)
+def _cut(scenes: str, window_s: float, crossing_at_s: float | None, float64: bool, file_key: tuple) -> RecordedCut:
+    return cut_recorded(scenes, window_s=window_s, crossing_at_s=crossing_at_s,
+                        dtype=np.float64 if float64 else np.float32)
+
+
+def recorded_cut(problem: Problem) -> RecordedCut | None:
+    """The problem's recording read and cut into scenes (`diffsense.scene.cut_recorded`), host
+    arrays only; None for simulated scenarios. A command line reads it first, so that a bad
+    file is refused before anything else starts; the objective then takes the same cut, kept
+    while the file (its size, times and inode) is unchanged."""
+    traffic = problem.traffic
+    if traffic.scenes is None:
+        return None
+    path = Path(traffic.scenes.partition(":")[2])
+    try:
+        st = path.stat()
+        file_key = (st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    except OSError as e:
+        raise InputError(f"recorded scenes: {path}: {e.strerror}") from None
+    return _cut(traffic.scenes, traffic.window_s, traffic.crossing_at_s, problem.prediction.float64, file_key)
+
+
+def scenes_line(problem: Problem) -> str:
+    """The progress line of a job's first step: the scenarios simulated, or the recording read."""
+    traffic = problem.traffic
+    if traffic.scenes is not None:
+        return f"{problem.sensor_kind}: reading {traffic.scenes}"
+    return f"{problem.sensor_kind}: simulating {len(traffic.scenarios)} scenarios x {traffic.variants} variants"
+
+
+def objective(problem: Problem, *, predictor: Any = None, min_vehicles: int = 0,
+              progress: Callable[[str], None] | None = None) -> Objective:
     """E(r) of `problem`: the scenarios simulated, its sensor (built once, with the problem) and
     its predictor loaded, every random draw fixed by `problem.seed`. `predictor` (optional)
     replaces `problem.prediction.predictor` (an already loaded one, to load it once for several
     problems); `min_vehicles` pads the simulated scenes' vehicle axis to at least that width
-    (absent vehicles, which change no number), so that another objective's programs fit it."""
+    (absent vehicles, which change no number), so that another objective's programs fit it.
+    Recorded scenes are read and cut first, before the predictor loads, and `progress` (optional)
+    is told what the recording gave (`diffsense.scene.RecordingSummary.line`)."""
     traffic, prediction, question = problem.traffic, problem.prediction, problem.question
     dtype = _precision(prediction.float64)
     sensor = problem.sensing.built
+    cut = recorded_cut(problem)
+    if cut is not None and progress is not None:
+        progress(cut.summary.line())
     predictor = _predictor(prediction) if predictor is None else predictor
     predictor = _in_dtype(predictor, prediction.predictor_dtype, dtype)
     noise_key = seed_keys(problem.seed)[1]  # [0] is the scenes' (traffic_scenes)
-    if traffic.scenes is not None:
+    if cut is not None:
         scenes, index, names, weather = recorded_scenes(
-            traffic.scenes, spec=predictor.spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
-            stride_frames=traffic.prediction_stride_frames,
-            dtype=dtype)
+            cut, spec=predictor.spec, sensors=[sensor, *relevance_stand_ins(problem.params)],
+            stride_frames=traffic.prediction_stride_frames)
     else:
         shifted, index, names, weather = traffic_scenes(problem, predictor.spec, sensor, dtype, min_vehicles)
         scenes = shifted.base

@@ -27,6 +27,7 @@ from diffsense import config as cfgio
 from diffsense.metrics import PAPER_SCENARIOS, EstimatorConfig
 from diffsense.predictors import Predictor
 from diffsense.runtime import InputError
+from diffsense.scene import DEFAULT_WINDOW_S
 from diffsense.sensors import Sensor
 from diffsense.solve import BoxConfig, SolveConfig
 from diffsense.study._settings import load_settings, problem_fields
@@ -52,7 +53,7 @@ STAGE_OF = {
     "float64": "prediction", "predictor_dtype": "prediction", "weather": "traffic",
     "traffic_speed_offset_kmh": "traffic", "objective": "question", "miss_penalty_m2": "question",
     "steps": "solver", "solve": "solver", "dense_check": "solver", "extra_curve_points": "solver",
-    "cost_weight": "question", "costs": "question", "box": "solver",
+    "cost_weight": "question", "costs": "question", "box": "solver", "window_s": "traffic", "crossing_at_s": "traffic",
 }
 _SPECS = {"traffic": TrafficSpec, "sensing": SensingSpec, "prediction": PredictionSpec, "question": QuestionSpec,
           "solver": SolverSpec}
@@ -116,6 +117,8 @@ class Problem:
         cost_weight: float = 0.0,
         costs: str | None = None,
         box: BoxConfig = BoxConfig(),
+        window_s: float = DEFAULT_WINDOW_S,
+        crossing_at_s: float | None = None,
     ):
         keywords = dict(locals())  # the arguments, by name
         del keywords["self"]

@@ -23,6 +23,7 @@ from typing import Any
 from diffsense.metrics import PAPER_SCENARIOS, QUESTIONS, EstimatorConfig
 from diffsense.predictors import COMPUTE_DTYPES, Predictor
 from diffsense.runtime import InputError, finite_number
+from diffsense.scene import DEFAULT_WINDOW_S, check_window
 from diffsense.sensors import ParamSpec, Sensor, Suite, make_sensor, resolve_params
 from diffsense.solve import BoxConfig, SolveConfig
 from diffsense.study._members import Member, build_suite, is_named, named_members
@@ -98,6 +99,10 @@ class TrafficSpec:
         traffic_speed_offset_kmh: added to every scenario's ego start speed, and so to every
             vehicle's (theirs are relative to it): the ODD's traffic speed [km/h]; 0 keeps the
             scenarios' own. Not for recorded scenes, which move at the speeds they were recorded at.
+        window_s: recorded scenes only: the length of the window cut around each lane change, at
+            least the predictor's 3 s history and 5 s future [s] (`diffsense.scene.recorded_scenes`).
+        crossing_at_s: recorded scenes only: where in the window the lane change crosses the
+            marking [s from its start]; None: each window placed to fit the recording.
     """
 
     scenarios: Sequence[str] = PAPER_SCENARIOS
@@ -107,6 +112,8 @@ class TrafficSpec:
     background_vehicles: int = 0
     weather: Mapping[str, float] | None = None
     traffic_speed_offset_kmh: float = 0.0
+    window_s: float = DEFAULT_WINDOW_S
+    crossing_at_s: float | None = None
 
     def __post_init__(self):
         _hold(self, scenarios=_scenario_names(self.scenarios))
@@ -120,6 +127,13 @@ class TrafficSpec:
         if self.scenes is not None and self.traffic_speed_offset_kmh != 0.0:
             raise InputError("recorded scenes have the speeds they were recorded at: traffic_speed_offset_kmh "
                              "applies to simulated scenarios only")
+        _hold(self, window_s=finite_number(self.window_s, "window_s"))
+        if self.crossing_at_s is not None:
+            _hold(self, crossing_at_s=finite_number(self.crossing_at_s, "crossing_at_s"))
+        if self.scenes is None and (self.window_s != DEFAULT_WINDOW_S or self.crossing_at_s is not None):
+            raise InputError("window_s and crossing_at_s cut windows from recorded scenes (scenes=...): the "
+                             "scenarios have their own duration")
+        check_window(self.window_s, self.crossing_at_s, 1.0)
 
 
 def _suite_with_configs(sensor: Any, configs: Mapping[str, str], profile: str) -> Sensor:
