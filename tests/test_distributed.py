@@ -11,6 +11,7 @@ import os
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import jax
@@ -103,7 +104,7 @@ def test_distributed_flags_need_distributed(tmp_path):
 def joined(monkeypatch):
     """The calls `initialize` makes: [("config", name, value) | ("join", kwargs)]."""
     calls: list = []
-    for var in _VARS:
+    for var in (*_VARS, "DIFFSENSE_JOIN_TIMEOUT_S"):
         monkeypatch.delenv(var, raising=False)
     monkeypatch.setattr(jax.distributed, "is_initialized", lambda: False)
     monkeypatch.setattr(jax.distributed, "initialize", lambda **kw: calls.append(("join", kw)))
@@ -113,29 +114,48 @@ def joined(monkeypatch):
     return calls
 
 
+@pytest.fixture
+def head():
+    """HOST:PORT of a coordinator that is listening (what a process other than 0 connects to)."""
+    with socket.create_server(("localhost", 0)) as server:
+        yield f"localhost:{server.getsockname()[1]}"
+
+
+@pytest.fixture
+def free() -> str:
+    """HOST:PORT with a free port on this host (what process 0 serves the coordinator on)."""
+    return f"localhost:{_free_port()}"
+
+
 def _join(coordinator=None, n=None, pid=None) -> tuple:
     return ("join", {"coordinator_address": coordinator, "num_processes": n, "process_id": pid})
 
 
-def test_arguments_go_to_jax_after_gloo_is_chosen(joined):
-    initialize("10.0.0.1:1234", 4, 3)
+def _joins(calls: list) -> list:
+    """The joins, each with the three arguments that say who joins where."""
+    keys = ("coordinator_address", "num_processes", "process_id")
+    return [("join", {k: c[1][k] for k in keys}) for c in calls if c[0] == "join"]
+
+
+def test_arguments_go_to_jax_after_gloo_is_chosen(joined, head):
+    initialize(head, 4, 3)
     initialize()  # nothing given: left to JAX (a cluster scheduler it detects)
-    assert joined == [("config", "jax_cpu_collectives_implementation", "gloo"), _join("10.0.0.1:1234", 4, 3),
-                      ("config", "jax_cpu_collectives_implementation", "gloo"), _join()]
+    assert [c if c[0] == "config" else _joins([c])[0] for c in joined] == [
+        ("config", "jax_cpu_collectives_implementation", "gloo"), _join(head, 4, 3),
+        ("config", "jax_cpu_collectives_implementation", "gloo"), _join()]
 
 
-def test_environment_variables_fill_what_the_arguments_leave(joined, monkeypatch):
-    monkeypatch.setenv("JAX_COORDINATOR_ADDRESS", "head:999")
+def test_environment_variables_fill_what_the_arguments_leave(joined, monkeypatch, head, free):
+    monkeypatch.setenv("JAX_COORDINATOR_ADDRESS", head)
     monkeypatch.setenv("JAX_NUM_PROCESSES", "2")
     monkeypatch.setenv("JAX_PROCESS_ID", "1")
     initialize()
-    initialize("given:1", 3, 0)
+    initialize(free, 3, 0)
     initialize(None, 5, None)
     monkeypatch.setenv("JAX_NUM_PROCESSES", "")  # set but empty: not given
     monkeypatch.setenv("JAX_PROCESS_ID", "")
     initialize()
-    assert [c for c in joined if c[0] == "join"] == [
-        _join("head:999", 2, 1), _join("given:1", 3, 0), _join("head:999", 5, 1), _join("head:999")]
+    assert _joins(joined) == [_join(head, 2, 1), _join(free, 3, 0), _join(head, 5, 1), _join(head)]
 
 
 def test_a_second_call_does_nothing(joined, monkeypatch):
@@ -155,9 +175,10 @@ def test_a_process_count_below_one_or_an_id_outside_it_is_refused(joined, n, pid
 
 
 @pytest.mark.parametrize(("n", "pid"), [(1, 0), (2, 1), (1, None), (None, 7)])
-def test_the_edges_that_are_accepted(joined, n, pid):
-    initialize("h:1", n, pid)
-    assert joined[-1] == _join("h:1", n, pid)
+def test_the_edges_that_are_accepted(joined, n, pid, head, free):
+    address = free if pid == 0 else head
+    initialize(address, n, pid)
+    assert _joins(joined)[-1] == _join(address, n, pid)
 
 
 def test_bad_environment_variables_are_refused(joined, monkeypatch):
@@ -171,14 +192,42 @@ def test_bad_environment_variables_are_refused(joined, monkeypatch):
 
 
 @pytest.mark.parametrize("error", [RuntimeError, ValueError])
-def test_a_failed_join_is_one_input_error(joined, monkeypatch, error):
+def test_a_failed_join_is_one_input_error(joined, monkeypatch, error, free):
     def refuse(**_):
         raise error("connection refused")
 
     monkeypatch.setattr(jax.distributed, "initialize", refuse)
     with pytest.raises(InputError, match="connection refused") as err:
-        initialize("h:1", 2, 0)
+        initialize(free, 2, 0)
     assert err.value.__cause__ is None and err.value.__suppress_context__
+
+
+@pytest.mark.parametrize(("env", "argument"), [("0", None), ("-1", None), ("nan", None), ("inf", None),
+                                             ("soon", None), (None, 0.0), (None, float("nan")), ("5", -1)])
+def test_a_join_timeout_that_is_not_a_positive_number_is_refused(joined, monkeypatch, head, env, argument):
+    if env is not None:
+        monkeypatch.setenv("DIFFSENSE_JOIN_TIMEOUT_S", env)
+    with pytest.raises(InputError, match="join_timeout_s" if argument is not None else "DIFFSENSE_JOIN_TIMEOUT_S"):
+        initialize(head, 2, 1, join_timeout_s=argument)
+    assert joined == []
+
+
+def test_jax_own_join_timeout_lies_beyond_ours(joined, monkeypatch, head):
+    initialize(head, 2, 1)  # the documented default, 60 s
+    monkeypatch.setenv("DIFFSENSE_JOIN_TIMEOUT_S", "90")
+    initialize(head, 2, 1)
+    initialize(head, 2, 1, join_timeout_s=120)  # the argument before the variable
+    assert [c[1]["initialization_timeout"] > t for c, t in zip(joined[1::2], (60, 90, 120), strict=True)] == [True] * 3
+
+
+@pytest.mark.parametrize("case", ["refused", "unresolvable", "port taken", "not this host"])
+def test_a_coordinator_out_of_reach_is_refused_within_the_timeout(joined, head, case):
+    address, pid = {"refused": (f"localhost:{_free_port()}", 1), "unresolvable": ("no-such-host.invalid:1234", 1),
+                    "port taken": (head, 0), "not this host": ("192.0.2.1:1234", 0)}[case]
+    start = time.monotonic()
+    with pytest.raises(InputError, match=address):
+        initialize(address, 2, pid, join_timeout_s=0.5)
+    assert time.monotonic() - start < 5 and joined == []
 
 
 def test_process_0_writes(monkeypatch):
