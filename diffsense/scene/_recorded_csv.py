@@ -18,6 +18,8 @@ import numpy as np
 
 from diffsense.runtime import InputError
 
+EXACT_INTEGER = 2.0**53  # beyond it float64 rounds consecutive integers together
+
 
 def _header(path: Path, reader, columns: Sequence[str]) -> list[int]:
     header = next(reader, None)
@@ -143,9 +145,12 @@ def read_columns(
 
 
 def integers(path: Path, name: str, values: np.ndarray, lines: np.ndarray) -> np.ndarray:
-    """A numeric column that must hold whole numbers (ids, frames, lanes), as int64."""
-    whole = values == np.round(values)
+    """A numeric column that must hold whole numbers (ids, frames, lanes), as int64: each within
+    the integers a float64 holds exactly (|v| < 2^53: a text past them reads as 2^53 or beyond), so
+    that two ids never read as one."""
+    whole = (values == np.round(values)) & (np.abs(values) < EXACT_INTEGER)
     if not np.all(whole):
         bad = int(np.argmin(whole))
-        raise InputError(f"{path}, line {lines[bad]}: column {name!r} must be a whole number, got {values[bad]:g}")
+        raise InputError(f"{path}, line {lines[bad]}: column {name!r} must be a whole number below 2^53 in size, "
+                         f"got {values[bad]:.17g}")
     return values.astype(np.int64)
