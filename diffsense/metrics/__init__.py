@@ -3,6 +3,11 @@ per-horizon RMSE of both predictions against the true future.
 
 `pad_vehicles(scene, width)` pads a batch's vehicle axis with absent cars, so that scenes of
 different vehicle counts pool into one `make_objective` batch.
+
+Intervals from the scene sample (`_intervals.py`): `scene_sums` of an evaluation, then
+`bootstrap_ci` (E) and `difference_ci` (E(a) - E(b), paired) reweight them over stratified
+resamples of the variants (`bootstrap_counts`); `with_variants(E, index)` is E over a resample's
+variants, evaluated afresh.
 """
 
 from diffsense.metrics._breakdown import breakdown, drawn_breakdown, drawn_tracked_summary, tracked_summary
@@ -15,6 +20,7 @@ from diffsense.metrics._build import (
     simulate_scenes,
     speed_shifted_scenes,
     with_scenes,
+    with_variants,
 )
 from diffsense.metrics._build import pad_vehicles
 from diffsense.metrics._cost import (
@@ -35,6 +41,16 @@ from diffsense.metrics._estimators import (
     relaxed_bernoulli,
 )
 from diffsense.metrics._grad import value_and_grad
+from diffsense.metrics._intervals import (
+    LEVEL,
+    RESAMPLES,
+    SceneSums,
+    bootstrap_ci,
+    bootstrap_counts,
+    difference_ci,
+    estimable,
+    scene_sums,
+)
 from diffsense.metrics._objective import QUESTIONS, Objective
 from diffsense.metrics._reference import (
     DrawnParts,
@@ -50,5 +66,6 @@ __all__ = [
     "SpeedShiftedScenes", "breakdown", "cost_breakdown", "drawn_breakdown", "drawn_tracked_summary", "coverage_parts", "is_deterministic", "load_costs",
     "make_cost", "make_objective", "member_costs", "pad_vehicles", "recorded_scenes", "reference_draw_margins", "relaxed_bernoulli",
     "relevance_reach", "safe_sqrt", "simulate_scenes", "speed_shifted_scenes", "tracked_summary", "value_and_grad",
-    "with_scenes",
+    "with_scenes", "with_variants", "LEVEL", "RESAMPLES", "SceneSums", "bootstrap_ci", "bootstrap_counts",
+    "difference_ci", "estimable", "scene_sums",
 ]

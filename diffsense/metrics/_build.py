@@ -214,6 +214,16 @@ def with_scenes(E: Objective, scenes: Scene) -> Objective:
                        (scenes, gt_pred.astype(E.dtype), fut.astype(E.dtype)))
 
 
+def with_variants(E: Objective, index) -> Objective:
+    """E over the variants `index` [M] of E's own (repeats allowed, any order): each keeps its
+    scenes, ground truth, noise key, Monte-Carlo draws, weight and weather, so E over a bootstrap
+    resample is E of that resample's variants, evaluated afresh (`diffsense.metrics.bootstrap_ci`
+    reweights sums instead)."""
+    at = jnp.asarray(np.asarray(index, np.int32))
+    data = jax.tree.map(lambda a: a[at], E.data)
+    return eqx.tree_at(lambda o: (o.data, o.weather), E, (data, jax.tree.map(lambda a: a[at], E.weather)))
+
+
 def make_objective(
     scenes: Scene,
     scenario: np.ndarray,

@@ -21,10 +21,12 @@ import numpy as np
 
 from diffsense.metrics import (
     ReferenceEvaluation,
+    SceneSums,
     breakdown,
     drawn_breakdown,
     drawn_tracked_summary,
     is_deterministic,
+    scene_sums,
     tracked_summary,
     value_and_grad,
 )
@@ -74,6 +76,7 @@ class Evaluator:
         self._hard: dict[tuple, Any] = {}
         self._reference: dict[tuple, Any] = {}
         self._drawn_breakdown: dict[tuple, dict[str, Any]] = {}
+        self._drawn_sums: dict[tuple, SceneSums] = {}
         self._scenes: tuple[np.ndarray, np.ndarray] | None = None
         self.reference_count = 0  # reference programs run (each K hard passes for a random law)
         self._progress = progress
@@ -141,7 +144,22 @@ class Evaluator:
         self._drawn_breakdown[key] = (
             drawn_breakdown(ref.parts, scenario, weight, E.scenario_names, E.spec.horizon_s())
             | {"tracked": drawn_tracked_summary(ref.parts, weight, float(E.miss_penalty_m2))})
+        self._drawn_sums[key] = scene_sums(ref.parts.sq_instant, ref.parts.coverage, weight, E.question,
+                                           float(E.miss_penalty_m2))
         self._reference[key] = dataclasses.replace(ref, parts=None)
+
+    def scene_sums(self, x, of_reference: bool = True) -> SceneSums | None:
+        """The per-variant sums E at x is a ratio of (`diffsense.metrics.SceneSums`), from the
+        evaluation made there (no program of its own beyond it): of E_ref over its detection
+        draws under a probabilistic law and `of_reference`, otherwise of E_hard. None for a
+        custom objective's reference, which keeps no draws."""
+        E = self.objective
+        if of_reference and not _deterministic(E):
+            self.reference(x)
+            return self._drawn_sums.get(self._key(x))
+        hard = self.hard(x)
+        return scene_sums(hard.sq_instant, hard.coverage, self._scene_weights()[1], E.question,
+                          float(E.miss_penalty_m2))
 
     def reference(self, x):
         """The reference evaluation (`ReferenceEvaluation`, numpy leaves) at x: E_ref and its
