@@ -14,7 +14,11 @@ from 1.1452 to 1.1443. "breakdown_of" and "E_pooled" (what the breakdown is of, 
 value) were added when the breakdown became that of the value the answer is chosen on, and the box
 result's "tracked", null until then, was filled; every other number stayed as stored. The config's
 "window_s" and "crossing_at_s" (the windows cut from recorded scenes) were added with the defaults
-when recorded windows came to fit the data.
+when recorded windows came to fit the data. The intervals from the scene sample ("ci_level",
+"ci_method", "E_ci", "comparisons", each sweep entry's "E_ci" and near_optimal's
+"indistinguishable") were added from the first run that reported them; every number stored
+before stayed as it was (the box answer, of one variant per scenario, has none: null, [] and a
+note).
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ from diffsense.solve import BoxResult, SolveResult, SweepPoint
 from diffsense.study import Result
 
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference",
-               "judged", "sweep", "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
+               "judged", "ci_level", "ci_method", "E_ci", "comparisons", "sweep", "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
                "objective", "breakdown_of", "E_pooled", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain",
                "sensitivity", "scenarios", "config", "versions")
 PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")  # beside python and diffsense
@@ -89,7 +89,8 @@ def test_one_parameter_result_json_key_by_key():
     assert out["sensor"] == "radar" and out["params"] == {"hfov_deg": [30.0, 180.0]} and out["units"] == {"hfov_deg": "deg"}
     assert out["param"] == "hfov_deg" and out["interval"] == [30.0, 180.0] and out["r_star"] == {"hfov_deg": 42.0}
     assert (out["E_soft_star"], out["E_hard_star"]) == (4.2, 4.1) and out["reference"] == {"answer_on": "E_hard"}
-    assert out["sweep"] == [{"r": 30.0, "E_hard": 5.0, "E_soft": 5.5}, {"r": 60.0, "E_hard": 4.0, "E_soft": None}]
+    assert out["sweep"] == [{"r": 30.0, "E_hard": 5.0, "E_soft": 5.5, "E_ci": None},
+                            {"r": 60.0, "E_hard": 4.0, "E_soft": None, "E_ci": None}]
     assert out["evaluations"] == {"objective": 7, "gradient": 3}
     assert out["programs_run"] == {"solve": {"soft": 3, "hard": 2}} and out["wall_s"] == {"compile": 1.5, "run": 2.5}
     assert out["on_bound"] is False and out["bracket"] == [30.0, 60.0] and out["tau_schedule"] == [4.0, 1.0]
@@ -120,8 +121,21 @@ def test_what_a_bare_result_writes_and_the_dense_check_added():
 def test_sweep_entries_take_each_steps_by_scenario_and_coverage_only():
     steps = ({"by_scenario": {"sc01": 5.0}, "coverage": {"c": 1}, "extra": 9}, {"by_scenario": {}, "coverage": {}})
     out = _result(sweep_breakdown=steps).to_json()
-    assert out["sweep"] == [{"r": 30.0, "E_hard": 5.0, "E_soft": 5.5, "by_scenario": {"sc01": 5.0}, "coverage": {"c": 1}},
-                            {"r": 60.0, "E_hard": 4.0, "E_soft": None, "by_scenario": {}, "coverage": {}}]
+    assert out["sweep"] == [{"r": 30.0, "E_hard": 5.0, "E_soft": 5.5, "E_ci": None, "by_scenario": {"sc01": 5.0},
+                             "coverage": {"c": 1}},
+                            {"r": 60.0, "E_hard": 4.0, "E_soft": None, "E_ci": None, "by_scenario": {}, "coverage": {}}]
+
+
+def test_the_intervals_land_at_the_top_and_in_each_sweep_entry():
+    method = {"method": "m", "resamples": 2000, "strata": "scenario", "seed": 0, "note": None}
+    comparison = {"a": "60 deg", "b": "30 deg", "diff_m": 1.0, "ci": [0.5, 1.5], "ci_unpaired": [0.0, 2.0],
+                  "paired": True, "verdict": "60 deg is worse than 30 deg by 1.00 m [0.50, 1.50]"}
+    out = _result(intervals={"ci_level": 0.9, "ci_method": method, "E_ci": [3.9, 4.4],
+                             "sweep_E_ci": [[4.8, 5.3], None], "comparisons": [comparison]}).to_json()
+    assert (out["ci_level"], out["ci_method"], out["E_ci"], out["comparisons"]) == (0.9, method, [3.9, 4.4], [comparison])
+    assert [p["E_ci"] for p in out["sweep"]] == [[4.8, 5.3], None]
+    bare = _result().to_json()  # a job that computes none: null, an empty list and a note why
+    assert bare["E_ci"] is None and bare["comparisons"] == [] and bare["ci_method"]["note"]
 
 
 def _box_result(**changes) -> Result:

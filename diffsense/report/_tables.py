@@ -56,20 +56,25 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
     """
     name = f"{result['param']} [{unit}]" if unit else result["param"]
     best = min(result["sweep"], key=lambda p: (p["E_hard"] is None, p["E_hard"]))
+    with_ci = "E_ci" in result  # a result.json written before intervals has no column for them
     rows = [
-        [f"step {_r(p['r'], scale)}", p["E_hard"], p["E_soft"], "best step" if p is best else ""]
+        [f"step {_r(p['r'], scale)}", p["E_hard"]] + ([_ci(p.get("E_ci"))] if with_ci else [])
+        + [p["E_soft"], "best step" if p is best else ""]
         for p in result["sweep"]
     ]
     where = "on bound" if result["on_bound"] else "interior"
     r_star = f"r* {_r(_r_star(result), scale)}"
     ref = result.get("reference") or {}
     on_ref = ref.get("answer_on") == "E_ref"
-    rows.append([r_star, ref["E_ref_star"] if on_ref else result["E_hard_star"], result["E_soft_star"], where])
+    rows.append([r_star, ref["E_ref_star"] if on_ref else result["E_hard_star"]]
+                + ([_ci(result["E_ci"])] if with_ci else []) + [result["E_soft_star"], where])
     ev, wall = result["evaluations"], result["wall_s"]
+    level = f"{result.get('ci_level', 0.9):.0%} CI [m]"
     lines = [
         f"{result['sensor']}: {name} over [{_r(result['interval'][0], scale)}, "
         f"{_r(result['interval'][1], scale)}]",
-        format_table(["r", "E_ref [m]" if on_ref else "E_hard [m]", "E_soft [m]", ""], rows),
+        format_table(["r", "E_ref [m]" if on_ref else "E_hard [m]"] + ([level] if with_ci else [])
+                     + ["E_soft [m]", ""], rows),
         f"continuous solve: {ev['objective']} objective + {ev['gradient']} gradient evaluations; "
         f"wall {wall['compile']:.1f} s compile + {wall['run']:.1f} s run",
     ]
@@ -78,6 +83,7 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
                      f"{ref['draws']} detection draws; estimator {ref['estimator']}); "
                      f"E_hard(r*) = {result['E_hard_star']:.4f} m with each detection at its median")
     lines += judged_lines(result)
+    lines += interval_lines(result)
     lines += [f"note: {n}" for n in result.get("notes", [])]
     held = " (r* is on a bound, held there for small changes)" if result.get("on_bound") else ""
     for theta, d in (result.get("sensitivity") or {}).items():
@@ -157,6 +163,24 @@ def judged_lines(result: Mapping[str, Any]) -> list[str]:
         return []
     return [(f"judged on fresh data (seed {j['seed']}: other scene variants, noise and detection draws, "
              f"{j['variants']} variants per scenario): E_ref(r*) = {_cell(j['E_ref'])} +- {_cell(j['E_ref_se'])} m")]
+
+
+def _ci(ci: Sequence[float] | None) -> str:
+    """An interval [lo, hi] [m] as a cell; "-" where there is none."""
+    return "-" if ci is None else f"[{ci[0]:.2f}, {ci[1]:.2f}]"
+
+
+def interval_lines(result: Mapping[str, Any]) -> list[str]:
+    """The paired comparisons' verdicts as one line, or why there are no intervals."""
+    method = result.get("ci_method") or {}
+    if "E_ci" not in result:
+        return []
+    if result["E_ci"] is None:
+        return [f"intervals: {method.get('note') or 'none'}"]
+    verdicts = [c["verdict"] for c in result.get("comparisons") or []]
+    head = (f"verdicts ({result['ci_level']:.0%} intervals of paired differences, "
+            f"{method.get('resamples')} bootstrap resamples of the scene variants): ")
+    return [head + "; ".join(verdicts)] if verdicts else []
 
 
 def _on_ref(result: Mapping[str, Any]) -> bool:

@@ -22,6 +22,7 @@ from diffsense.solve import (
 )
 from diffsense.study import _line_report as report
 from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._intervals import line_intervals
 from diffsense.study._judge import judged
 from diffsense.study._objective import objective, scenes_line
 from diffsense.study._problem import Problem, problem_config
@@ -128,6 +129,10 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
     answered = [(x[0], ev.e_hard(x[0])) for x in ev.hard_points()] if on_hard else \
         [(x[0], ev.e_reference(x[0])) for x in ev.reference_points()]
     answer = near_optimal(answered, lo, hi, result.r_star)
+    ci = line_intervals(ev, result, ev.e_hard(result.r_star) if on_hard else ev.e_reference(result.r_star),
+                        of_reference=not on_hard, seed=problem.seed, unit=spec.unit,
+                        recorded=problem.traffic.scenes is not None)
+    near = answer["near_optimal"] | {"indistinguishable": ci.pop("indistinguishable")}
     out = Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
         r_star={name: float(result.r_star)}, E_hard_star=ev.e_hard(result.r_star),
@@ -136,7 +141,7 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
                 "programs_lowered": clock.lowered},
         scenarios=tuple(E.scenario_names),
-        config=problem_config(problem), curves=curves, dense_check=dense, near_optimal=answer["near_optimal"],
+        config=problem_config(problem), curves=curves, dense_check=dense, near_optimal=near,
         flags=tuple(answer["flags"]), domain=domain, reference=report.reference_summary(ev, problem, result.r_star, on_hard),
-        judged=fresh, **parts)
+        judged=fresh, intervals=ci, **parts)
     return out, E

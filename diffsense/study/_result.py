@@ -22,7 +22,23 @@ result.json schema (every key always present; non-finite numbers are written as 
                              it was not chosen on: E_ref at r* over the scene variants, noise and
                              detection draws of the seed s (`diffsense.study._judge`); null when
                              the run was asked not to judge
-    "sweep"         [{"r": number, "E_hard": m, "E_soft": m}, ...]   the stepped sweep
+    "ci_level"      number   the level of every interval below (0.9)
+    "ci_method"     {"method", "resamples": B, "strata": "scenario" | "none", "seed", "note": string | null}
+                             how the intervals are made (`diffsense.metrics.bootstrap_ci`: a
+                             stratified percentile bootstrap over scene variants, reweighting
+                             per-variant sums the run computed; detection draws' error included
+                             under a probabilistic law); "note" says why there is none
+    "E_ci"          [lo, hi] | null   interval [m] on the answer's E at r* (E_ref_star under a
+                             probabilistic law, E_hard_star under the threshold law); null where
+                             it cannot be estimated (one variant per scenario) or is not computed
+                             (a many-parameter solve)
+    "comparisons"   [{"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "verdict"}, ...]
+                             each sweep step (and r*, where it is no step) against the best step:
+                             diff_m = E(a) - E(b) [m], "ci" its paired interval (the same scenes
+                             resampled for both), "ci_unpaired" the interval had they seen
+                             independent scenes, "verdict" in plain words; [] for many parameters
+    "sweep"         [{"r": number, "E_hard": m, "E_soft": m, "E_ci": [lo, hi] | null}, ...]
+                             the stepped sweep, each step's E with its interval
     "evaluations"   {"objective": int, "gradient": int}  of the continuous solve (sweep excluded)
     "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...}}  compiled-program
                              runs (memoised points are not run again)
@@ -51,8 +67,12 @@ result.json schema (every key always present; non-finite numbers are written as 
     "tracked"       {"E_tracked": m, "missed_share": f, "J_m2": m^2, "miss_penalty_m2": m^2}
                              at r*: the "tracked" question's pieces (whichever was optimised)
     "sweep" entries also hold "by_scenario" and "coverage" at their step.
-    "near_optimal"  {"tolerance_m": m, "intervals": [[lo, hi], ...]}  every evaluated r whose E_hard
-                             is within the tolerance of the best (`diffsense.solve._answer`)
+    "near_optimal"  {"tolerance_m": m, "intervals": [[lo, hi], ...], "indistinguishable": [r, ...] | null}
+                             "intervals": every evaluated r whose E_hard is within the tolerance
+                             of the best (`diffsense.solve._answer`; the "flat" flag reads it);
+                             "indistinguishable": the sweep steps the scene sample cannot tell
+                             from the best step (their paired difference's interval holds 0), the
+                             best included; null without intervals
     "flags"         [string, ...]  "pressing_on_bound", "flat" (`diffsense.solve._answer`)
     "domain"        {"factor", "validation_rmse_m": [m at 1..5 s], "scenarios": {name: {"rmse_gt_m":
                              [...], "inside": bool}}, "outside": [names]}  the predictor's domain
@@ -78,11 +98,13 @@ from typing import Any
 
 import numpy as np
 
+from diffsense.metrics import LEVEL
 from diffsense.runtime import __version__, json_ready
 from diffsense.solve import SolveResult
 
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
-RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference", "judged", "sweep",
+RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference", "judged", "ci_level",
+               "ci_method", "E_ci", "comparisons", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
                "objective", "breakdown_of", "E_pooled", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "sensitivity", "scenarios",
                "config", "versions")
@@ -162,6 +184,7 @@ class Result:
     box_notes: tuple[str, ...] = ()
     judged: dict[str, Any] | None = None
     member_costs: dict[str, float] | None = None
+    intervals: dict[str, Any] | None = None
 
     @property
     def sweep(self):
@@ -207,9 +230,11 @@ class Result:
             "E_hard_star": self.E_hard_star,
             "reference": self.reference,
             "judged": self.judged,
-            "sweep": [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft}
+            **self._intervals_json(),
+            "sweep": [{"r": p.r, "E_hard": p.E_hard, "E_soft": p.E_soft, "E_ci": ci}
                       | ({k: b[k] for k in ("by_scenario", "coverage")} if b else {})
-                      for p, b in zip(s.sweep, self.sweep_breakdown or [None] * len(s.sweep))],
+                      for p, b, ci in zip(s.sweep, self.sweep_breakdown or [None] * len(s.sweep),
+                                          (self.intervals or {}).get("sweep_E_ci") or [None] * len(s.sweep))],
             "evaluations": {k: s.evaluations[k] for k in ("objective", "gradient")},
             "programs_run": self.programs_run,
             "wall_s": dict(self.wall_s),
@@ -234,6 +259,13 @@ class Result:
             out["dense_check"] = self.dense_check
         return json_ready(out)
 
+    def _intervals_json(self) -> dict[str, Any]:
+        """result.json's "ci_level", "ci_method", "E_ci" and "comparisons" (module docstring)."""
+        ci = self.intervals or {"ci_level": LEVEL, "ci_method": {
+            "method": None, "resamples": 0, "strata": None, "seed": None,
+            "note": "no interval: not computed for a many-parameter solve"}, "E_ci": None, "comparisons": []}
+        return {k: ci[k] for k in ("ci_level", "ci_method", "E_ci", "comparisons")}
+
     def _breakdown_of(self) -> dict[str, Any]:
         """result.json's "breakdown_of" and "E_pooled": which value the breakdown is of."""
         of = "E_ref" if self.breakdown and "E_ref" in self.breakdown else "E_hard"
@@ -246,7 +278,7 @@ class Result:
         out = {
             "sensor": self.sensor, "params": {k: list(v) for k, v in self.params.items()}, "units": dict(self.units),
             "param": None, "interval": None, "r_star": dict(self.r_star), "E_soft_star": self.E_soft_star,
-            "E_hard_star": self.E_hard_star, "reference": self.reference, "judged": self.judged, "sweep": [], "evaluations": self.evaluations,
+            "E_hard_star": self.E_hard_star, "reference": self.reference, "judged": self.judged, **self._intervals_json(), "sweep": [], "evaluations": self.evaluations,
             "programs_run": self.programs_run, "wall_s": dict(self.wall_s), "on_bound": self.on_bound,
             "bracket": None, "tau_schedule": list(b.tau_schedule), "notes": list(self.box_notes),
             "objective": self.config.get("objective", "eq12"), **self._breakdown_of(),
