@@ -135,47 +135,83 @@ MAX_TOML_DEPTH = 32  # nested arrays and inline tables; the shipped configs nest
 
 
 def _nesting(text: str) -> int:
-    """The deepest nesting of TOML arrays and inline tables in `text` (strings and comments
-    skipped), counted before parsing: tomllib recurses once per level."""
-    depth = deepest = 0
+    """How deep `text` nests, counted in one pass before parsing (strings and comments skipped):
+    the deepest nesting of arrays and inline tables, or the most parts of one dotted key, each a
+    table level. tomllib recurses once per nesting level, and a dotted key costs it time quadratic
+    in its parts."""
+    stack: list[str] = []  # the arrays and inline tables open at i
+    deepest = parts = 0
+    in_key, after_equals = True, False  # where a key may stand; whether this line has had its "="
     i, n = 0, len(text)
     while i < n:
         ch = text[i]
         if ch == "#":
             i = text.find("\n", i)
             i = n if i < 0 else i
-        elif ch in "\"'":
+            continue
+        if ch in "\"'":
             quote = text[i:i + 3] if text[i:i + 3] in ('"""', "'''") else ch
             i += len(quote)
             while i < n and not text.startswith(quote, i):
                 i += 2 if ch == '"' and text[i] == "\\" else 1
             i += len(quote) - 1
-        elif ch in "[{" and (ch == "{" or depth or _in_value(text, i)):
-            depth += 1
-            deepest = max(deepest, depth)
-        elif ch in "]}" and depth:
-            depth -= 1
+        elif ch == "\n" and not stack:
+            in_key, after_equals, parts = True, False, 0
+        elif ch == "=" and in_key:
+            in_key, after_equals = False, True
+        elif ch == "." and in_key:
+            parts += 1
+            deepest = max(deepest, len(stack) + parts + 1)
+        elif ch == "{" or (ch == "[" and (stack or after_equals)):  # else "[" opens a table header
+            stack.append(ch)
+            deepest = max(deepest, len(stack))
+            in_key, parts = ch == "{", 0
+        elif ch == "," and stack and stack[-1] == "{":
+            in_key, parts = True, 0
+        elif ch in "]}" and stack:
+            stack.pop()
         i += 1
     return deepest
 
 
-def _in_value(text: str, i: int) -> bool:
-    """Whether the "[" at i opens an array (after "=") rather than a table header."""
-    line_start = text.rfind("\n", 0, i) + 1
-    return "=" in text[line_start:i]
-
-
 def parse_toml(text: str, source: str) -> dict[str, Any]:
     """Parse TOML text, turning a syntax error into one `InputError` line naming `source`; nesting
-    deeper than MAX_TOML_DEPTH is refused before parsing."""
+    deeper than MAX_TOML_DEPTH is refused before parsing, an integer beyond 64 bits after it."""
     if _nesting(text) > MAX_TOML_DEPTH:
         raise InputError(f"{source}: TOML nested more than {MAX_TOML_DEPTH} levels deep")
     try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"{source}: malformed TOML: {e}") from None
+    except ValueError:  # tomllib's int() of an integer over Python's 4300-digit limit
+        raise InputError(f"{source}: malformed TOML: an integer with too many digits") from None
     except RecursionError:  # a nesting the count above missed: still one line, never a traceback
         raise InputError(f"{source}: TOML nested too deeply") from None
+    _check_integers(data, source)
+    return data
+
+
+INT64 = (-(2**63), 2**63 - 1)
+
+
+def _check_integers(data: dict[str, Any], source: str) -> None:
+    """Refuse an integer outside 64 bits, as the TOML spec requires (tomllib keeps any size, and
+    a float() of one past 1e308 overflows). Iterative, with each key path kept as a link to its
+    parent's: tables nest as deep as a header's dotted key says."""
+    stack: list[tuple[Any, tuple | None]] = [(data, None)]
+    while stack:
+        value, trail = stack.pop()
+        if isinstance(value, dict):
+            stack.extend((v, (str(k), trail)) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((v, (f"[{i}]", trail)) for i, v in enumerate(value))
+        elif isinstance(value, int) and not isinstance(value, bool) and not INT64[0] <= value <= INT64[1]:
+            keys = []
+            while trail is not None:
+                keys.append(trail[0])
+                trail = trail[1]
+            where = ".".join(reversed(keys)).replace(".[", "[")
+            raise InputError(f"{source}: {where[:200]}: an integer beyond TOML's 64-bit range")
 
 
 def load(cls: type[C], path: str | Path) -> C:
