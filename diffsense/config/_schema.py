@@ -131,7 +131,7 @@ def replace(config: C, **changes: Any) -> C:
     return from_dict(type(config), merged)
 
 
-MAX_TOML_DEPTH = 32  # nested arrays and inline tables; the shipped configs nest 2 deep
+MAX_TOML_DEPTH = 32  # arrays, inline tables and dotted-key parts; the shipped configs nest 2 deep
 
 
 def _nesting(text: str) -> int:
