@@ -178,14 +178,8 @@ def _with_cell(content: bytes, column: str, token: str) -> bytes:
     return "\n".join(lines).encode()
 
 
-# Vehicle sizes are not checked for plausibility yet: one past float32's range is an inf in the scene.
-UNCHECKED = {("highd", "tracksMeta.csv", "width"), ("ngsim", None, "v_Width")}
-
-
 @pytest.mark.parametrize(("kind", "name", "column"), [
-    pytest.param(*case, id="-".join(c or "csv" for c in case), marks=[pytest.mark.xfail(
-        strict=True, reason="a vehicle size of 1e39 m loads as an inf")] if case in UNCHECKED else [])
-    for case in SWEEP])
+    pytest.param(*case, id="-".join(c or "csv" for c in case)) for case in SWEEP])
 def test_a_huge_number_in_any_cell_is_refused_or_loads_finite(highd, ngsim, kind, name, column):
     for token in HUGE:
         if kind == "highd":

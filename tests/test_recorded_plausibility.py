@@ -106,3 +106,11 @@ def test_the_command_line_refuses_a_1e300_coordinate_at_once_writing_nothing(tmp
     assert done.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), done.stderr[-2000:]
     assert tracks.name in lines[0] and "7" in lines[0]
     assert not out.exists() and time.perf_counter() - t0 < 60
+
+
+@pytest.mark.parametrize("column, value", [("width", "40"), ("height", "6"), ("width", "1e39")])
+def test_an_implausible_vehicle_size_is_refused(tmp_path, column, value):
+    tracks = files.write_highd(tmp_path)
+    meta = tracks.with_name("01_tracksMeta.csv")
+    files.edit_cell(meta, 3, column, value)
+    _refused(lambda: read_highd(tracks), meta.name, "line 3", repr(column))

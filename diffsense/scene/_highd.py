@@ -42,7 +42,7 @@ from diffsense.runtime import InputError
 from diffsense.scene._datatypes import CAR, TRUCK, Scene
 from diffsense.scene._recorded import check_window, group_rows, recorded_scenes
 from diffsense.scene._recorded_types import DEFAULT_HOLD_S, DEFAULT_WINDOW_S, Recording, Track
-from diffsense.scene._recorded_checks import check_motion, check_road, check_speeds
+from diffsense.scene._recorded_checks import check_motion, check_road, check_sizes, check_speeds
 from diffsense.scene._recorded_csv import integers, read_columns
 
 _KINDS = {"car": CAR, "truck": TRUCK}
@@ -86,12 +86,11 @@ def _tracks_meta(path: Path) -> dict[int, tuple[float, float, int, int]]:
     """id -> (length [m], width [m], kind, driving direction)."""
     cols, lines = read_columns(path, ("id", "width", "height", "drivingDirection"), ("class",))
     ids = integers(path, "id", cols["id"], lines)
+    check_sizes(path, cols["width"], cols["height"], lines, ("width", "height"))  # the box's width is along x
     meta = {}
     for i, line in enumerate(lines):
         length, width, direction = cols["width"][i], cols["height"][i], cols["drivingDirection"][i]
         kind = _KINDS.get(str(cols["class"][i]).lower())
-        if not (length > 0 and width > 0):
-            raise InputError(f"{path}, line {line}: width and height must be > 0 m, got {length} and {width}")
         if direction not in (1.0, 2.0):
             raise InputError(f"{path}, line {line}: drivingDirection must be 1 or 2, got {direction}")
         if kind is None:

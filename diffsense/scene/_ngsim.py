@@ -31,7 +31,7 @@ from diffsense.runtime import InputError
 from diffsense.scene._datatypes import CAR, TRUCK, Scene
 from diffsense.scene._recorded import check_window, group_rows, recorded_scenes
 from diffsense.scene._recorded_types import DEFAULT_HOLD_S, DEFAULT_WINDOW_S, Recording, Track
-from diffsense.scene._recorded_checks import check_motion, check_road, check_speeds
+from diffsense.scene._recorded_checks import check_motion, check_road, check_sizes, check_speeds
 from diffsense.scene._recorded_csv import integers, read_columns
 
 FOOT_M = 0.3048
@@ -81,6 +81,7 @@ def read_ngsim(csv_path: str | Path) -> Recording:
     d = (num_lanes * LANE_WIDTH_FT - cols["Local_X"]) * FOOT_M
     speed = cols["v_Vel"] * FOOT_M
     _check_feet(path, cols, lane_id)
+    check_sizes(path, length, width, lines, ("v_Length", "v_Width"))
     check_speeds(path, speed, lines)
     check_motion(path, ids, frame, s, d, speed, FRAME_RATE_HZ, lines, "the NGSIM frame rate")
     check_road(path, d, num_lanes * LANE_WIDTH_FT * FOOT_M, lines)

@@ -11,6 +11,8 @@ and the line, before anything is computed from numbers that cannot be right.
 - Speeds within SPEED_RANGE_MPS ([-5, 90] m/s along the direction of travel: 324 km/h).
 - The road. A vehicle centre lies within ROAD_MARGIN_M (3.5 m, a hard shoulder) outside the
   recording's outermost lane markings.
+- Sizes. A vehicle is at most MAX_LENGTH_M (30 m: a long road train) long and MAX_WIDTH_M (5 m: a
+  wide load) wide.
 """
 
 from __future__ import annotations
@@ -26,6 +28,21 @@ GLITCH_M_S = 20.0
 SPEED_RANGE_MPS = (-5.0, 90.0)
 ROAD_MARGIN_M = 3.5
 _MOVING_MPS = 1.0
+MAX_LENGTH_M = 30.0
+MAX_WIDTH_M = 5.0
+
+
+def check_sizes(path: Path, length_m: np.ndarray, width_m: np.ndarray, lines: np.ndarray,
+                columns: tuple[str, str]) -> None:
+    """Every vehicle's length within (0, MAX_LENGTH_M] and width within (0, MAX_WIDTH_M] [m];
+    `columns` names the file's (length, width) columns."""
+    for what, column, size, most in (("length", columns[0], length_m, MAX_LENGTH_M),
+                                     ("width", columns[1], width_m, MAX_WIDTH_M)):
+        bad_rows = ~((size > 0.0) & (size <= most))
+        if bad_rows.any():
+            bad = int(np.argmax(bad_rows))
+            raise InputError(f"{path}, line {lines[bad]}: column {column!r}, the vehicle's {what}, must be in the "
+                             f"plausible (0, {most:g}] m, got {float(size[bad])} m")
 
 
 def check_road(path: Path, d_m: np.ndarray, width_m: np.ndarray | float, lines: np.ndarray) -> None:
