@@ -110,7 +110,7 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
                    help="refuse a run whose estimated memory exceeds this (default: half the machine's memory)")
     p.add_argument("--distributed", action="store_true",
                    help="join a multi-process run (one process per host; variants sharded over all devices); "
-                        "process 0 writes the outputs")
+                        "process 0 writes the outputs; the join waits at most DIFFSENSE_JOIN_TIMEOUT_S s (default 60)")
     p.add_argument("--coordinator", metavar="HOST:PORT", help="process 0's address (else JAX_COORDINATOR_ADDRESS "
                    "or the scheduler's)")
     p.add_argument("--num-processes", type=int, metavar="N", help="processes in the run (else JAX_NUM_PROCESSES)")

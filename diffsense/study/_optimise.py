@@ -32,8 +32,9 @@ def optimise(problem: Problem, *, E: Objective | None = None, predictor: Any = N
     `E` reuses an already built `objective(problem)`; `predictor` an already loaded predictor.
     `sensitivity` names ODD parameters ("rain_mm_h", ...) whose dr*/dtheta is computed at the
     answer (`diffsense.sensitivity`) and kept in `Result.sensitivity`.
-    `distributed` (True, or {"coordinator", "num_processes", "process_id"}) joins a multi-process
-    run first (`diffsense.runtime.initialize`; before any JAX computation): every process
+    `distributed` (True, or {"coordinator", "num_processes", "process_id", "join_timeout_s"})
+    joins a multi-process run first (`diffsense.runtime.initialize`, bounded by the join timeout:
+    DIFFSENSE_JOIN_TIMEOUT_S, default 60 s; before any JAX computation): every process
     calls `optimise` with the same problem and gets the same result.
     `on_evaluation(event)` is called after every objective evaluation the run makes, with
     {"kind": "soft" | "hard" | "reference", "E_m", "tau", "done", "planned"} (for progress displays).
