@@ -18,7 +18,9 @@ when recorded windows came to fit the data. The intervals from the scene sample 
 "ci_method", "E_ci", "comparisons", each sweep entry's "E_ci" and near_optimal's
 "indistinguishable") were added from the first run that reported them; every number stored
 before stayed as it was (the box answer, of one variant per scenario, has none: null, [] and a
-note).
+note). The config's "target_ci" (the decision's interval to reach by adding variants) was added
+with its default, null; the comparisons' "ci_unpaired" were re-stored when the intervals became
+the expanded percentile ones (the paired ones, at 2 variants the resamples' extremes, stayed).
 """
 
 from __future__ import annotations

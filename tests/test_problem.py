@@ -33,7 +33,7 @@ DEFAULTS = {
     "float64": True, "predictor_dtype": "auto", "weather": None, "traffic_speed_offset_kmh": 0.0,
     "objective": "eq12", "miss_penalty_m2": 100.0, "steps": None, "solve": SolveConfig(), "dense_check": None,
     "extra_curve_points": 0, "cost_weight": 0.0, "costs": None, "box": BoxConfig(), "window_s": 10.0,
-    "crossing_at_s": None,
+    "crossing_at_s": None, "target_ci": None,
 }
 TWO = {"hfov": (30, 60), "range": (40, 90)}
 

@@ -112,7 +112,7 @@ def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict
                       ("objective", "objective"), ("miss_penalty", "miss_penalty_m2"), ("predictor_dtype", "predictor_dtype"),
                       ("profile", "profile"), ("sensor_config", "sensor_config"),
                       ("traffic_speed_offset_kmh", "traffic_speed_offset_kmh"), ("window_s", "window_s"),
-                      ("crossing_at_s", "crossing_at_s")):
+                      ("crossing_at_s", "crossing_at_s"), ("target_ci", "target_ci")):
         if getattr(args, flag) is not None:
             fields[key] = getattr(args, flag)
     estimator = to_dict(settings.problem.estimator)

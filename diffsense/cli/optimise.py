@@ -68,6 +68,9 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
                    help="with --scenes: where in the window the lane change crosses the marking [s from its start] "
                    "(default: each window placed to fit the recording)")
     p.add_argument("--variants", type=int, help="variants per scenario")
+    p.add_argument("--target-ci", type=float, metavar="M",
+                   help="double the variants (from --variants, up to 128) until the decision's interval (best against "
+                   "second-best step) has a half-width under M metres or excludes 0; result.json's target_ci says how many")
     p.add_argument("--model", help="predictor weights (.msgpack of this project or a PyTorch checkpoint)")
     p.add_argument("--profile", choices=("physical", "paper"),
                    help="the sensors' shipped constants: physical (default) or paper (the paper's design)")

@@ -128,11 +128,32 @@ def bootstrap_counts(strata: Int[np.ndarray, " N"], *, weight: Float[np.ndarray,
     return counts
 
 
-def _quantiles(values: Float[np.ndarray, " B"], level: float) -> tuple[float, float]:
+def _quantiles(values: Float[np.ndarray, " B"], level: float, tail: float | None = None) -> tuple[float, float]:
+    """The `tail` and 1 - `tail` quantiles of `values` (None: (1 - level)/2, the plain percentile)."""
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must lie in (0, 1), got {level}")
-    lo, hi = np.quantile(values, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
+    tail = (1.0 - level) / 2.0 if tail is None else tail
+    lo, hi = np.quantile(values, [tail, 1.0 - tail])
     return float(lo), float(hi)
+
+
+def expanded_tail(strata: Int[np.ndarray, " N"], weight: Float[np.ndarray, " N"] | None = None,
+                  level: float = LEVEL) -> float:
+    """The tail probability the expanded percentile interval (Hesterberg 2015, "What teachers
+    should know about the bootstrap", sec. 4) reads its quantiles at, in place of (1 - level)/2:
+
+        Phi(-sqrt(n / (n - 1)) t_{df, (1 + level)/2}),   df = N - H
+
+    A stratum of n variants resampled with replacement has (n - 1)/n of the sample's variance
+    (n: the smallest stratum; exact where all hold as many), and a variance estimated from N
+    variants in H strata has N - H degrees of freedom: with few variants the plain percentile
+    interval, in effect a normal interval with the variance plugged in, is narrow on both counts.
+    Requires `estimable(strata, weight)`."""
+    from scipy import stats
+
+    _, sizes = np.unique(np.asarray(strata)[_real(strata, weight)], return_counts=True)
+    n, df = int(np.min(sizes)), int(np.sum(sizes) - sizes.size)
+    return float(stats.norm.cdf(-np.sqrt(n / (n - 1.0)) * stats.t.ppf((1.0 + level) / 2.0, df)))
 
 
 def bootstrap_ci(sums: SceneSums, strata: Int[np.ndarray, " N"], *, level: float = LEVEL,
@@ -142,7 +163,9 @@ def bootstrap_ci(sums: SceneSums, strata: Int[np.ndarray, " N"], *, level: float
     the scenario of each variant) reweighting `sums` (module docstring). Same seed, same
     interval. None where it cannot be estimated (a stratum with one variant)."""
     counts = bootstrap_counts(strata, weight=_weight(sums), resamples=resamples, seed=seed)
-    return None if counts is None else _quantiles(sums.e(counts), level)
+    if counts is None:
+        return None
+    return _quantiles(sums.e(counts), level, expanded_tail(strata, _weight(sums), level))
 
 
 def difference_ci(a: SceneSums, b: SceneSums, strata: Int[np.ndarray, " N"], *, paired: bool = True,
@@ -155,7 +178,7 @@ def difference_ci(a: SceneSums, b: SceneSums, strata: Int[np.ndarray, " N"], *, 
     if counts is None:
         return None
     other = counts if paired else bootstrap_counts(strata, weight=_weight(a), resamples=resamples, seed=seed, stream=1)
-    return _quantiles(a.e(counts) - b.e(other), level)
+    return _quantiles(a.e(counts) - b.e(other), level, expanded_tail(strata, _weight(a), level))
 
 
 def _weight(sums: SceneSums) -> np.ndarray:
@@ -164,4 +187,5 @@ def _weight(sums: SceneSums) -> np.ndarray:
 
 
 __all__ = ["LEVEL", "RESAMPLES", "SceneSums", "bootstrap_ci", "bootstrap_counts", "difference_ci", "estimable",
+           "expanded_tail",
            "scene_sums"]

@@ -54,6 +54,7 @@ STAGE_OF = {
     "traffic_speed_offset_kmh": "traffic", "objective": "question", "miss_penalty_m2": "question",
     "steps": "solver", "solve": "solver", "dense_check": "solver", "extra_curve_points": "solver",
     "cost_weight": "question", "costs": "question", "box": "solver", "window_s": "traffic", "crossing_at_s": "traffic",
+    "target_ci": "traffic",
 }
 _SPECS = {"traffic": TrafficSpec, "sensing": SensingSpec, "prediction": PredictionSpec, "question": QuestionSpec,
           "solver": SolverSpec}
@@ -119,6 +120,7 @@ class Problem:
         box: BoxConfig = BoxConfig(),
         window_s: float = DEFAULT_WINDOW_S,
         crossing_at_s: float | None = None,
+        target_ci: float | None = None,
     ):
         keywords = dict(locals())  # the arguments, by name
         del keywords["self"]

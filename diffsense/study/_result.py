@@ -264,7 +264,8 @@ class Result:
         ci = self.intervals or {"ci_level": LEVEL, "ci_method": {
             "method": None, "resamples": 0, "strata": None, "seed": None,
             "note": "no interval: not computed for a many-parameter solve"}, "E_ci": None, "comparisons": []}
-        return {k: ci[k] for k in ("ci_level", "ci_method", "E_ci", "comparisons")}
+        return {k: ci[k] for k in ("ci_level", "ci_method", "E_ci", "comparisons")} | (
+            {"target_ci": ci["target_ci"]} if "target_ci" in ci else {})
 
     def _breakdown_of(self) -> dict[str, Any]:
         """result.json's "breakdown_of" and "E_pooled": which value the breakdown is of."""

@@ -103,6 +103,9 @@ class TrafficSpec:
             least the predictor's 3 s history and 5 s future [s] (`diffsense.scene.recorded_scenes`).
         crossing_at_s: recorded scenes only: where in the window the lane change crosses the
             marking [s from its start]; None: each window placed to fit the recording.
+        target_ci: the one-parameter job doubles the variants (from `variants`, up to a cap) until
+            the decision's interval has a half-width under this [m] or excludes 0
+            (`diffsense.optimise`); None: `variants` as given. Not for recorded scenes.
     """
 
     scenarios: Sequence[str] = PAPER_SCENARIOS
@@ -114,6 +117,7 @@ class TrafficSpec:
     traffic_speed_offset_kmh: float = 0.0
     window_s: float = DEFAULT_WINDOW_S
     crossing_at_s: float | None = None
+    target_ci: float | None = None
 
     def __post_init__(self):
         _hold(self, scenarios=_scenario_names(self.scenarios))
@@ -134,6 +138,12 @@ class TrafficSpec:
             raise InputError("window_s and crossing_at_s cut windows from recorded scenes (scenes=...): the "
                              "scenarios have their own duration")
         check_window(self.window_s, self.crossing_at_s, 1.0)
+        if self.target_ci is not None:
+            _hold(self, target_ci=finite_number(self.target_ci, "target_ci"))
+            if self.target_ci <= 0.0:
+                raise InputError(f"target_ci must be a positive half-width [m], got {self.target_ci!r}")
+            if self.scenes is not None:
+                raise InputError("target_ci adds scene variants: recorded scenes (scenes=...) have none to add")
 
 
 def _suite_with_configs(sensor: Any, configs: Mapping[str, str], profile: str) -> Sensor:
