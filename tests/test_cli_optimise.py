@@ -92,7 +92,7 @@ def test_one_sensor_writes_into_out_itself_and_quiet_prints_only_the_table(tmp_p
     argv = ["--sensor", "camera", "--sensitivity", "rain_mm_h, fog_visibility_m", "--out", str(out)]
     code, printed, err = _main([*argv, "--quiet"], capsys)
     assert (code, err) == (0, "")
-    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "result.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "report.html", "result.json"]
     assert printed == "\n" + report.summary_table(_line("camera", 2.5), unit="deg") + "\n\n"
     (_, kw), = solved
     assert kw["sensitivity"] == ("rain_mm_h", "fog_visibility_m")
@@ -257,7 +257,7 @@ def test_a_small_run_writes_a_consistent_result(weights, tmp_path, capsys):
     # The threshold law is deterministic: its reference is E_hard, with no standard error.
     assert dense["E_ref_best_se"] == 0.0 and dense["E_ref_star"] == pytest.approx(result["E_hard_star"], rel=1e-12)
     assert dense["E_ref_best"] <= min(p["E_hard"] for p in result["sweep"]) + 1e-12
-    assert sorted(p.name for p in out.iterdir()) == ["detections.png", "manifest.json", "objective.png",
+    assert sorted(p.name for p in out.iterdir()) == ["detections.png", "manifest.json", "objective.png", "report.html",
                                                      "result.json", "rmse_horizon.png"]
 
 

@@ -5,7 +5,8 @@
     plot_detection_timeline          the paper's Figs 8/9: p_detect over time per vehicle
     plot_coverage                    the sensor inspector's p_detect field around the sensor
     summary_table, comparison_table  plain-text tables (run summary; radar vs camera)
-    write_run                        result.json (schema: `diffsense.Result`) and the three figures
+    write_run                        result.json (schema: `diffsense.Result`), the three figures, report.html
+    html_report                      report.html: the run as one self-contained page (result.json's content)
     write_pareto, pareto_table       pareto.json and pareto.png of `diffsense.pareto`; its printed table
     print_case_study                 the case study's tables and statements (diffsense.report.case_study)
     CompileClock                     wall time split into JAX compilation and the rest
@@ -19,6 +20,7 @@ from diffsense.report._figures import (
     plot_objective,
     plot_rmse_horizon,
 )
+from diffsense.report._html import html_report
 from diffsense.report._pareto import (
     PARETO_FILES,
     pareto_table,
@@ -38,6 +40,6 @@ from diffsense.runtime import CompileClock
 
 __all__ = [
     "PARETO_FILES", "RUN_FILES", "CompileClock", "box_table", "breakdown_table", "comparison_table", "format_table",
-    "pareto_table", "plot_coverage", "plot_detection_timeline", "plot_objective", "plot_pareto", "plot_rmse_horizon",
+    "html_report", "pareto_table", "plot_coverage", "plot_detection_timeline", "plot_objective", "plot_pareto", "plot_rmse_horizon",
     "print_case_study", "summary_table", "write_pareto", "write_run",
 ]

@@ -1,4 +1,4 @@
-"""A run's outputs from a `diffsense.Result`: result.json and the three figures."""
+"""A run's outputs from a `diffsense.Result`: result.json, the three figures and report.html."""
 
 from __future__ import annotations
 
@@ -10,20 +10,32 @@ from diffsense.report._figures import (
     plot_objective,
     plot_rmse_horizon,
 )
-from diffsense.runtime import write_json
+from diffsense.report._html import FIGURES, html_report
+from diffsense.runtime import write_bytes, write_json
 
-RUN_FILES = ("result.json", "objective.png", "rmse_horizon.png", "detections.png")
+RUN_FILES = ("result.json", "objective.png", "rmse_horizon.png", "detections.png", "report.html")
 
 
 def write_run(result: Any, folder: str | Path) -> dict[str, Any]:
-    """Write result.json and, when the result has curves, objective.png, rmse_horizon.png and
-    detections.png into `folder`; returns the result.json content."""
+    """Write result.json, the figures when the result has curves (objective.png, rmse_horizon.png,
+    detections.png) and report.html (`html_report`: the page, with those figures embedded) into
+    `folder`; returns the result.json content."""
     folder = Path(folder)
     content = result.to_json()
     write_json(folder / "result.json", content)
+    figures = {}
+    if result.curves is not None:
+        _write_figures(result, folder)
+        # The page embeds the figures as drawn (their PNG bytes, read back from this call's
+        # files, never a previous run's), so it is one file that needs nothing beside it.
+        figures = {n: (folder / n).read_bytes() for n in FIGURES}
+    write_bytes(folder / "report.html", html_report(content, figures).encode("utf-8"))
+    return content
+
+
+def _write_figures(result: Any, folder: Path) -> None:
+    """objective.png, rmse_horizon.png and detections.png from the result's curves."""
     c = result.curves
-    if c is None:
-        return content
     name, unit = result.param, result.units[result.param]
     variants = result.config.get("variants")
     scenes = f"{', '.join(result.scenarios)} ({variants} variant{'s' if variants != 1 else ''} each)"
@@ -36,4 +48,3 @@ def write_run(result: Any, folder: str | Path) -> dict[str, Any]:
                       title=f"{result.sensor}: RMSE against the true future per sweep step, {scenes}")
     plot_detection_timeline(folder / "detections.png", c.timeline, c.timeline_roles, dt_s=c.dt_s,
                             param=name, unit=unit, title=f"{result.sensor}: hard detections, {first}")
-    return content
