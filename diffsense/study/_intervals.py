@@ -20,7 +20,7 @@ from diffsense.metrics import LEVEL, RESAMPLES, SceneSums, bootstrap_ci, differe
 from diffsense.runtime import to_host
 from diffsense.solve import Evaluator
 
-METHOD = "stratified percentile bootstrap over scene variants"
+METHOD = "stratified expanded percentile bootstrap over scene variants"
 
 
 def strata(ev: Evaluator, recorded: bool) -> tuple[np.ndarray, np.ndarray]:
