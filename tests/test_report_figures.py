@@ -151,11 +151,15 @@ def test_horizon_panels_labels_and_legend_stay_apart_and_inside(drawn, tmp_path,
     _assert_apart_and_inside(drawn[0])
 
 
-@pytest.mark.parametrize("title", ["", TITLE])
-def test_objective_axes_twin_axis_and_legend_stay_apart_and_inside(drawn, tmp_path, title):
+@pytest.mark.parametrize("title, intervals", [("", False), (TITLE, False), (TITLE, True)])
+def test_objective_axes_twin_axis_and_legend_stay_apart_and_inside(drawn, tmp_path, title, intervals):
     r = np.deg2rad(np.linspace(30.0, 180.0, 41))
     e_soft = 50.0 + 40.0 * (r - r[0])
     sweep = [{"r": x, "E_hard": 50.0 + 40.0 * (x - r[0])} for x in r[::8]]
+    ci = {}
+    if intervals:  # the legend's three interval rows too
+        sweep = [p | {"E_ci": [p["E_hard"] - 2.0, p["E_hard"] + 3.0]} for p in sweep]
+        ci = {"E_star": 50.1, "E_star_ci": [48.0, 53.0], "r_star_ci": [float(r[0]), float(r[4])], "level": 0.9}
     plot_objective(tmp_path / "o.png", r, e_soft, e_soft + 0.3, np.gradient(e_soft, r) * 1e-4, sweep, float(r[0]),
-                   param="hfov", scale=SCALE, unit="deg", title=title)
+                   param="hfov", scale=SCALE, unit="deg", title=title, **ci)
     _assert_apart_and_inside(drawn[0])

@@ -1,6 +1,7 @@
 """The run's figures, written atomically as PNG.
 
-- objective.png: E_soft and E_hard over r, the sweep's points and r*, dE/dr on a second axis.
+- objective.png: E_soft and E_hard over r, the sweep's points and r*, dE/dr on a second axis;
+  the intervals as error bars (each step, the answer's E) and a band (r*) where the run has them.
 - rmse_horizon.png: the paper's Figs 6/7: per-horizon RMSE (0.2 .. 5 s) against the true
   future for every sweep step and for ground-truth inputs, one panel per scenario.
 - detection timeline: the paper's Figs 8/9: p_detect over time of the target and its
@@ -68,6 +69,10 @@ def plot_objective(
     sweep: Sequence[Mapping[str, float]],
     r_star: float,
     *,
+    E_star: float | None = None,
+    E_star_ci: Sequence[float] | None = None,
+    r_star_ci: Sequence[float] | None = None,
+    level: float | None = None,
     param: str = "r",
     scale: float = 1.0,
     unit: str = "",
@@ -77,12 +82,19 @@ def plot_objective(
 
     Only evaluated points are drawn as data: E_hard as markers (it is piecewise constant between
     evaluations, with steps nobody evaluated), E_soft and dE/dr as markers joined by thin lines
-    that the legend calls interpolation. The legend sits outside the axes.
+    that the legend calls interpolation. The legend sits outside the axes. Where the run has
+    intervals (result.json's "E_ci", "sweep[i].E_ci", "r_star_ci"), each sweep step's is an error
+    bar on its E, the answer's E at r* is a marker with its own, and r*'s interval is a band
+    across the axes; a missing (None) interval draws nothing in its place.
 
     Args:
         r, E_soft, E_hard, dE_dr: [n] curves over r (the objective's units; dE/dr in m per unit).
-        sweep: [{"r", "E_hard", "E_soft"}] the stepped sweep.
+        sweep: [{"r", "E_hard", "E_soft", "E_ci" (optional [lo, hi] [m] or None)}] the stepped sweep.
         r_star: the answer.
+        E_star, E_star_ci: the answer's E [m] (what result.json's "E_ci" is on) and its [lo, hi];
+            drawn only with both.
+        r_star_ci: [lo, hi] of r* (the objective's units), or None.
+        level: the intervals' level (0.9), for the legend.
         param, scale, unit: x-axis name and display conversion (dE/dr is divided by scale).
     """
     x = np.asarray(r, dtype=float) * scale
@@ -94,6 +106,7 @@ def plot_objective(
     ax.plot(sweep_r, [p["E_hard"] for p in sweep], "o", color="C1", label="sweep (hard)")
     r_star_label = f"r* = {_label(r_star, scale, unit)}"
     ax.axvline(r_star * scale, color="C3", linestyle="--", label=r_star_label)
+    _draw_intervals(ax, sweep, r_star, E_star, E_star_ci, r_star_ci, level, scale)
     ax.set_xlabel(f"{param} [{unit}]" if unit else param)
     ax.set_ylabel("E_RMSE [m]")
     twin = ax.twinx()
@@ -109,6 +122,35 @@ def plot_objective(
         fig.suptitle(title, fontsize=10)
     _place(fig, legend_rows=math.ceil(len(labels) / 3), title=bool(title), right_in=_TWIN_RIGHT_IN)
     save_figure(fig, path, dpi=_DPI)
+
+
+def _interval(ci: Any) -> tuple[float, float] | None:
+    """[lo, hi] as two finite floats, or None (a null, short or non-finite interval)."""
+    if ci is None or len(ci) != 2:
+        return None
+    lo, hi = (float(v) if isinstance(v, numbers.Real) else math.nan for v in ci)
+    return (lo, hi) if math.isfinite(lo) and math.isfinite(hi) else None
+
+
+def _draw_intervals(ax: Any, sweep: Sequence[Mapping[str, Any]], r_star: float, E_star: float | None,
+                    E_star_ci: Sequence[float] | None, r_star_ci: Sequence[float] | None,
+                    level: float | None, scale: float) -> None:
+    """The sweep's error bars, the answer's E with its interval and r*'s band (plot_objective)."""
+    what = f"{level:.0%} interval" if isinstance(level, numbers.Real) and math.isfinite(level) else "interval"
+    # Each interval a vertical bar from lo to hi at its r (an expanded percentile interval need
+    # not be centred on E, so the ends are drawn as they are, not as E -/+ a length).
+    steps = [(p["r"] * scale, ci) for p in sweep if (ci := _interval(p.get("E_ci"))) is not None]
+    if steps:
+        ax.vlines([x for x, _ in steps], [c[0] for _, c in steps], [c[1] for _, c in steps],
+                  color="C1", linewidth=1.5, label=f"sweep {what}")
+    star_ci = _interval(E_star_ci)
+    if star_ci is not None and E_star is not None and math.isfinite(float(E_star)):
+        ax.vlines([r_star * scale], [star_ci[0]], [star_ci[1]], color="C3", linewidth=2.0,
+                  label=f"E at r* with its {what}")
+        ax.plot([r_star * scale], [float(E_star)], "D", color="C3", markersize=5, label="_E at r*")
+    band = _interval(r_star_ci)
+    if band is not None:
+        ax.axvspan(band[0] * scale, band[1] * scale, color="C3", alpha=0.12, linewidth=0, label=f"r* {what}")
 
 
 def plot_rmse_horizon(

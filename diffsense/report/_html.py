@@ -151,7 +151,8 @@ def _sweep(content: Mapping[str, Any]) -> str:
 
 
 def _chart(content: Mapping[str, Any]) -> str:
-    """Inline SVG: each sweep step's E with its interval as an error bar, r* and its interval in red."""
+    """Inline SVG: each sweep step's E with its interval as an error bar, r* and its E's interval in
+    red, and r*'s own interval ("r_star_ci") as a band behind them."""
     pts = [(p["r"], p["E_hard"], p.get("E_ci")) for p in content["sweep"] if _finite(p.get("E_hard"))]
     star = (content.get("r_star") or {}).get(content.get("param"))
     if _finite(star) and _finite(answer_value(content)):
@@ -171,7 +172,13 @@ def _chart(content: Mapping[str, Any]) -> str:
     def sy(y: float) -> float:
         return top + (y1 - y) / (y1 - y0) * (h - top - bottom)
 
-    out = [f'<line x1="{left}" y1="{h - bottom}" x2="{w - right}" y2="{h - bottom}" stroke="#444"/>',
+    band = ((content.get("r_star_ci") or {}).get(content.get("param")) or []) if _finite(star) else []
+    out, banded = [], len(band) == 2 and all(_finite(v) for v in band)
+    if banded:  # r*'s interval, a band behind the points
+        a, b = (min(max(v, x0), x1) for v in band)
+        out.append(f'<rect class="r-star-ci" x="{sx(a):.1f}" y="{top}" width="{max(sx(b) - sx(a), 1.0):.1f}" '
+                   f'height="{h - top - bottom}" fill="#c22" fill-opacity="0.12"/>')
+    out += [f'<line x1="{left}" y1="{h - bottom}" x2="{w - right}" y2="{h - bottom}" stroke="#444"/>',
            f'<line x1="{left}" y1="{top}" x2="{left}" y2="{h - bottom}" stroke="#444"/>']
     for k in range(5):
         xv, yv = x0 + (x1 - x0) * k / 4, y0 + (y1 - y0) * k / 4
@@ -185,7 +192,7 @@ def _chart(content: Mapping[str, Any]) -> str:
         out.append(f'<circle cx="{sx(x):.1f}" cy="{sy(y):.1f}" r="4" fill="{colour}"/>')
     unit = (content.get("units") or {}).get(content.get("param"), "")
     out.append(f'<text x="{(left + w - right) / 2}" y="{h - 6}" text-anchor="middle">'
-               f'{_e(content.get("param"))} [{_e(unit)}]; red: r*</text>')
+               f'{_e(content.get("param"))} [{_e(unit)}]; red: r*{" (band: its interval)" if banded else ""}</text>')
     out.append(f'<text x="14" y="{(top + h - bottom) / 2}" text-anchor="middle" '
                f'transform="rotate(-90 14 {(top + h - bottom) / 2})">E [m] with its interval</text>')
     return (f'<figure><svg viewBox="0 0 {w} {h}" width="{w}" height="{h}" '
