@@ -21,6 +21,9 @@ before stayed as it was (the box answer, of one variant per scenario, has none: 
 note). The config's "target_ci" (the decision's interval to reach by adding variants) was added
 with its default, null; the comparisons' "ci_unpaired" were re-stored when the intervals became
 the expanded percentile ones (the paired ones, at 2 variants the resamples' extremes, stayed).
+"r_star_ci" (how far r* would move with other traffic: null for the box answer), ci_method's
+"r_star", "r_star_points" and "r_star_resolution", and each comparison's "of" ("sweep") were added
+from the first run that reported them; every other number stayed as stored.
 """
 
 from __future__ import annotations

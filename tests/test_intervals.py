@@ -15,8 +15,10 @@ result.json's interval keys.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -25,6 +27,7 @@ import diffsense as ds
 from diffsense.metrics import (
     EstimatorConfig,
     SceneSums,
+    argmin_ci,
     bootstrap_ci,
     bootstrap_counts,
     difference_ci,
@@ -32,6 +35,7 @@ from diffsense.metrics import (
     with_variants,
 )
 from diffsense.solve import Evaluator
+from diffsense.study import modality_comparisons, with_modality_comparisons
 from tests._laws import THRESHOLD
 from tests.test_cli_optimise import _line, _main, _Solved
 
@@ -131,7 +135,7 @@ def test_result_json_carries_the_intervals_a_real_run_stored():
     against = [c for c in result["comparisons"] if c["b"] == f"{best['r']:.5g} deg"]
     assert len(against) >= len(steps) - 1
     for c in result["comparisons"]:
-        assert set(c) == {"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "verdict"}
+        assert set(c) == {"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "of", "verdict"} and c["of"] == "sweep"
         assert c["ci"][0] <= c["ci"][1] and c["ci_unpaired"][0] <= c["ci_unpaired"][1] and c["verdict"]
     same = result["near_optimal"]["indistinguishable"]
     assert best["r"] in same and set(same) <= set(steps)
@@ -161,3 +165,71 @@ def test_the_printed_table_shows_each_interval_and_the_verdicts(tmp_path, capsys
     code, out, _ = _main(["--sensor", "radar", "--out", str(tmp_path / "p"), "--quiet"], capsys)
     assert code == 0 and "one variant per scenario" in out and "[3.50" not in out and "worse than" not in out
 
+
+
+@dataclasses.dataclass(frozen=True)
+class _Answer:
+    """The fields of a `diffsense.Result` that a sensor-against-sensor comparison reads."""
+    sensor: str
+    param: str
+    r_star: dict
+    units: dict
+    E_hard_star: float
+    reference: dict
+    intervals: dict[str, Any]
+
+
+def _sums(per_variant_sq) -> SceneSums:
+    sq = np.asarray(per_variant_sq, np.float64)
+    return SceneSums(sq=sq, instants=np.ones_like(sq), tracked_sq=sq[None], tracked=np.ones_like(sq)[None])
+
+
+def test_r_star_s_interval_is_the_argmin_re_picked_on_each_resample():
+    strata = np.array([0, 0, 0, 1, 1, 1])
+    # 20 is best on every variant: every resample picks it
+    clear = [_sums([4, 4, 4, 9, 9, 9]), _sums([1, 1, 1, 2, 2, 2]), _sums([3, 3, 3, 5, 5, 5])]
+    assert argmin_ci([10.0, 20.0, 30.0], clear, strata) == (20.0, 20.0)
+    # each scenario's first variant favours 10, the others 20: resamples split between the two
+    split = [_sums([0, 3, 3, 0, 3, 3]), _sums([2.2, 1, 1, 2.2, 1, 1]), _sums([9] * 6)]
+    counts = bootstrap_counts(strata, seed=0)
+    picks = np.where(np.stack([s.e2(counts) for s in split[:2]]).argmin(axis=0) == 0, 10.0, 20.0)
+    assert set(np.unique(picks)) == {10.0, 20.0}  # the resamples do disagree
+    assert argmin_ci([10.0, 20.0, 30.0], split, strata) == (10.0, 20.0)  # ends at evaluated points, never 30
+    assert argmin_ci([10.0], [_sums([1.0, 2.0])], np.array([0, 1])) is None  # one variant per scenario
+    with pytest.raises(ValueError):
+        argmin_ci([10.0, 20.0], clear, strata)
+
+
+def test_result_json_s_r_star_interval_holds_r_star_at_evaluated_points():
+    result = json.loads((GOLDEN / "line_result.json").read_text())
+    (name, (lo, hi)), = result["r_star_ci"].items()
+    assert name == result["param"] and lo <= result["r_star"][name] <= hi
+    assert result["interval"][0] <= lo and hi <= result["interval"][1]
+    assert result["ci_method"]["r_star_points"] >= len(result["sweep"])
+    assert result["ci_method"]["r_star_resolution"] > 0
+
+
+def test_sensor_against_sensor_is_paired_over_the_shared_scenes(small):
+    """`modality_comparisons` on two answers over the same variants (here one objective at two r
+    standing for two sensors: the machinery is the same): the paired difference of the sums,
+    its interval beside the unpaired one, and nothing for answers over other scenes."""
+    _, ev, strata = small
+
+    def answer(sensor, r):
+        return _Answer(sensor=sensor, param="hfov_deg", r_star={"hfov_deg": r}, units={"hfov_deg": "deg"},
+                       E_hard_star=ev.e_hard(r), reference={"answer_on": "E_ref", "E_ref_star": ev.e_reference(r)},
+                       intervals={"answer_sums": ev.scene_sums(r), "strata": strata, "ci_method": {"seed": 0},
+                                  "comparisons": []})
+
+    a, b = answer("radar", 120.0), answer("camera", 30.0)
+    (c,) = modality_comparisons({"radar": a, "camera": b})
+    assert (c["a"], c["b"], c["of"]) == ("radar at 120 deg", "camera at 30 deg", "sensors")
+    assert c["diff_m"] == pytest.approx(ev.e_reference(120.0) - ev.e_reference(30.0), abs=1e-12)
+    assert tuple(c["ci"]) == difference_ci(ev.scene_sums(120.0), ev.scene_sums(30.0), strata)
+    assert tuple(c["ci_unpaired"]) == difference_ci(ev.scene_sums(120.0), ev.scene_sums(30.0), strata, paired=False)
+    assert c["ci"][0] <= c["diff_m"] <= c["ci"][1]
+    other = answer("camera", 30.0)
+    other = dataclasses.replace(other, intervals=dict(other.intervals, strata=np.zeros_like(strata)))  # other scenes
+    assert modality_comparisons({"radar": a, "camera": other}) == []
+    both = with_modality_comparisons({"radar": a, "camera": b})
+    assert [x["comparisons"] for x in (both["radar"].intervals, both["camera"].intervals)] == [[c], [c]]

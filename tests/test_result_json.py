@@ -18,7 +18,7 @@ from diffsense.solve import BoxResult, SolveResult, SweepPoint
 from diffsense.study import Result
 
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference",
-               "judged", "ci_level", "ci_method", "E_ci", "comparisons", "sweep", "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
+               "judged", "ci_level", "ci_method", "E_ci", "r_star_ci", "comparisons", "sweep", "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
                "objective", "breakdown_of", "E_pooled", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain",
                "sensitivity", "scenarios", "config", "versions")
 PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")  # beside python and diffsense
@@ -131,11 +131,14 @@ def test_the_intervals_land_at_the_top_and_in_each_sweep_entry():
     comparison = {"a": "60 deg", "b": "30 deg", "diff_m": 1.0, "ci": [0.5, 1.5], "ci_unpaired": [0.0, 2.0],
                   "paired": True, "verdict": "60 deg is worse than 30 deg by 1.00 m [0.50, 1.50]"}
     out = _result(intervals={"ci_level": 0.9, "ci_method": method, "E_ci": [3.9, 4.4],
-                             "sweep_E_ci": [[4.8, 5.3], None], "comparisons": [comparison]}).to_json()
+                             "sweep_E_ci": [[4.8, 5.3], None], "r_star_ci": (30.0, 45.0),
+                             "comparisons": [comparison]}).to_json()
     assert (out["ci_level"], out["ci_method"], out["E_ci"], out["comparisons"]) == (0.9, method, [3.9, 4.4], [comparison])
+    assert out["r_star_ci"] == {out["param"]: [30.0, 45.0]}  # keyed by the parameter, as r_star is
     assert [p["E_ci"] for p in out["sweep"]] == [[4.8, 5.3], None]
     bare = _result().to_json()  # a job that computes none: null, an empty list and a note why
     assert bare["E_ci"] is None and bare["comparisons"] == [] and bare["ci_method"]["note"]
+    assert bare["r_star_ci"] is None
 
 
 def _box_result(**changes) -> Result:

@@ -5,7 +5,8 @@
 A thin face over `diffsense.optimise`: the flags and `--config` become a `diffsense.Problem`
 (defaults: configs/optimise/default.toml; a config file may be partial), the library solves it,
 and result.json, objective.png, rmse_horizon.png and detections.png are written to --out
-(with `--sensor both`, one folder per sensor and comparison.txt; with --pareto, pareto.json and
+(with `--sensor both`, one folder per sensor, each result.json's comparisons holding the paired
+radar-versus-camera difference with its interval, and comparison.txt; with --pareto, pareto.json and
 pareto.png). --suite FILE reads the sensors, parameters and cost weight from a suite file.
 """
 
@@ -30,7 +31,7 @@ from diffsense.metrics import ESTIMATORS
 from diffsense.predictors import load_predictor
 from diffsense.runtime import InputError
 from diffsense.scene import check_speed_offset, load_scenario
-from diffsense.study import ODD_PARAMETERS, check_theta, memory_estimate_bytes, recorded_cut
+from diffsense.study import ODD_PARAMETERS, check_theta, memory_estimate_bytes, recorded_cut, with_modality_comparisons
 
 PROG = "python -m diffsense.optimise"
 
@@ -197,18 +198,19 @@ def main(argv: list[str] | None = None, prog: str = PROG) -> int:
     progress("loaded the predictor" + (f" {model}" if model else " (shipped weights)"))
     if lambdas is not None:
         return pareto_run(todo[0], lambdas, out, predictor, progress)
-    results = {}
+    results, solved = {}, {}
     comparison = None
     # Every file of the run is written to a staging folder and published into --out as one set:
     # an interrupted or failed run leaves the previous run's files as they were.
     with runtime.output_set(out) as staging:
         for problem in todo:
-            folder = staging / problem.sensor_kind if len(todo) > 1 else staging
-            result = ds.optimise(problem, predictor=predictor, progress=progress, on_evaluation=progress.evaluation,
-                                 sensitivity=theta)
-            from diffsense import report  # imported in the background above (or waits for it)
+            solved[problem.sensor_kind] = ds.optimise(problem, predictor=predictor, progress=progress,
+                                                      on_evaluation=progress.evaluation, sensitivity=theta)
+        from diffsense import report  # imported in the background above (or waits for it)
 
-            results[problem.sensor_kind] = report.write_run(result, folder)
+        # radar against camera, paired over the scenes both saw: in each sensor's result.json
+        for kind, result in with_modality_comparisons(solved).items():
+            results[kind] = report.write_run(result, staging / kind if len(todo) > 1 else staging)
         if len(results) > 1:
             first = next(iter(results.values()))
             comparison = report.comparison_table(results, unit=first["units"][first["param"]])

@@ -5,7 +5,8 @@ per-horizon RMSE of both predictions against the true future.
 different vehicle counts pool into one `make_objective` batch.
 
 Intervals from the scene sample (`_intervals.py`): `scene_sums` of an evaluation, then
-`bootstrap_ci` (E) and `difference_ci` (E(a) - E(b), paired) reweight them over stratified
+`bootstrap_ci` (E), `difference_ci` (E(a) - E(b), paired) and `argmin_ci` (the minimiser over
+evaluated points) reweight them over stratified
 resamples of the variants (`bootstrap_counts`); `with_variants(E, index)` is E over a resample's
 variants, evaluated afresh.
 """
@@ -45,10 +46,12 @@ from diffsense.metrics._intervals import (
     LEVEL,
     RESAMPLES,
     SceneSums,
+    argmin_ci,
     bootstrap_ci,
     bootstrap_counts,
     difference_ci,
     estimable,
+    expanded_tail,
     scene_sums,
 )
 from diffsense.metrics._objective import QUESTIONS, Objective
@@ -66,6 +69,6 @@ __all__ = [
     "SpeedShiftedScenes", "breakdown", "cost_breakdown", "drawn_breakdown", "drawn_tracked_summary", "coverage_parts", "is_deterministic", "load_costs",
     "make_cost", "make_objective", "member_costs", "pad_vehicles", "recorded_scenes", "reference_draw_margins", "relaxed_bernoulli",
     "relevance_reach", "safe_sqrt", "simulate_scenes", "speed_shifted_scenes", "tracked_summary", "value_and_grad",
-    "with_scenes", "with_variants", "LEVEL", "RESAMPLES", "SceneSums", "bootstrap_ci", "bootstrap_counts",
-    "difference_ci", "estimable", "scene_sums",
+    "with_scenes", "with_variants", "LEVEL", "RESAMPLES", "SceneSums", "argmin_ci", "bootstrap_ci", "bootstrap_counts",
+    "difference_ci", "estimable", "expanded_tail", "scene_sums",
 ]

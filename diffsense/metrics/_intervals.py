@@ -181,11 +181,32 @@ def difference_ci(a: SceneSums, b: SceneSums, strata: Int[np.ndarray, " N"], *, 
     return _quantiles(a.e(counts) - b.e(other), level, expanded_tail(strata, _weight(a), level))
 
 
+def argmin_ci(points: Float[np.ndarray, " P"], sums: list[SceneSums], strata: Int[np.ndarray, " N"], *,
+              level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> tuple[float, float] | None:
+    """The bootstrap interval [lo, hi] on the minimiser r* of E over evaluated `points` [P]
+    (`sums` [P] their `SceneSums`, over the same variants): each resample (the resamples of
+    `bootstrap_ci`, same seed) reweights every point alike and picks the point of least E, a
+    re-solve over the points on that resample's scenes; the interval is the picks' quantiles at
+    `bootstrap_ci`'s expanded tails. Resolved to the points: r* between two of them is read as
+    one of the two. None where it cannot be estimated."""
+    if len(points) != len(sums) or not sums:
+        raise ValueError(f"{len(points)} points and {len(sums)} sums: one SceneSums per point")
+    counts = bootstrap_counts(strata, weight=_weight(sums[0]), resamples=resamples, seed=seed)
+    if counts is None:
+        return None
+    e = np.stack([s.e2(counts) for s in sums])  # [P, B]
+    picks = np.asarray(points, np.float64)[np.argmin(e, axis=0)]
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level}")
+    tail = expanded_tail(strata, _weight(sums[0]), level)
+    # the quantiles read outward to evaluated points: no r* between two points is claimed
+    return (float(np.quantile(picks, tail, method="lower")), float(np.quantile(picks, 1.0 - tail, method="higher")))
+
+
 def _weight(sums: SceneSums) -> np.ndarray:
     # a real variant has instants; a padding row none
     return (np.asarray(sums.instants) > 0).astype(np.float64)
 
 
-__all__ = ["LEVEL", "RESAMPLES", "SceneSums", "bootstrap_ci", "bootstrap_counts", "difference_ci", "estimable",
-           "expanded_tail",
-           "scene_sums"]
+__all__ = ["LEVEL", "RESAMPLES", "SceneSums", "argmin_ci", "bootstrap_ci", "bootstrap_counts", "difference_ci",
+           "estimable", "expanded_tail", "scene_sums"]

@@ -97,7 +97,9 @@ def summary_table(result: Mapping[str, Any], *, scale: float = 1.0, unit: str = 
 def comparison_table(
     results: Mapping[str, Mapping[str, Any]], *, scale: float = 1.0, unit: str = ""
 ) -> str:
-    """The paper's radar-versus-camera comparison: E_hard per step and the optimum per sensor.
+    """The paper's radar-versus-camera comparison: E_hard per step and the optimum per sensor,
+    then the paired comparison of the answers (the first result's "comparisons" "of" "sensors")
+    with its unpaired interval beside it.
 
     Args:
         results: sensor name -> result dict, all for the same parameter and steps.
@@ -127,7 +129,8 @@ def comparison_table(
             format_table([""] + sensors, rows),
             f"best: {winner} at r* = {_r(_r_star(results[winner]), scale)} "
             f"(E_hard = {_cell(results[winner]['E_hard_star'])} m)",
-        ]
+        ] + [f"paired, each at its r*: {c['verdict']}; unpaired interval {_ci(c['ci_unpaired'])}"
+             for c in results[sensors[0]].get("comparisons", []) if c.get("of") == "sensors"]
     )
 
 
@@ -177,10 +180,23 @@ def interval_lines(result: Mapping[str, Any]) -> list[str]:
         return []
     if result["E_ci"] is None:
         return [f"intervals: {method.get('note') or 'none'}"]
-    verdicts = [c["verdict"] for c in result.get("comparisons") or []]
+    verdicts = [c["verdict"] for c in result.get("comparisons") or [] if c.get("of", "sweep") == "sweep"]
     head = (f"verdicts ({result['ci_level']:.0%} intervals of paired differences, "
             f"{method.get('resamples')} bootstrap resamples of the scene variants): ")
-    return [head + "; ".join(verdicts)] if verdicts else []
+    return ([head + "; ".join(verdicts)] if verdicts else []) + _r_star_lines(result)
+
+
+def _r_star_lines(result: Mapping[str, Any]) -> list[str]:
+    """How far r* would move with other traffic (result.json's "r_star_ci"), where it is known."""
+    method = result.get("ci_method") or {}
+    out = []
+    for name, (lo, hi) in (result.get("r_star_ci") or {}).items():
+        unit = (result.get("units") or {}).get(name, "")
+        gap = method.get("r_star_resolution")
+        out.append(f"r* with other traffic: {name} in [{lo:.4g}, {hi:.4g}] {unit} ({result['ci_level']:.0%}, "
+                   f"re-picked among the {method.get('r_star_points')} points evaluated"
+                   + (f", {gap:.3g} {unit} apart at most there)" if gap is not None else ")"))
+    return out
 
 
 def _on_ref(result: Mapping[str, Any]) -> bool:

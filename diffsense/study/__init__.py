@@ -6,10 +6,12 @@
     result = optimise(problem)             # the main job: a `Result`
     front = pareto(Problem.from_suite("configs/suites/radar_camera_d4.toml"))
     sensitivity(problem, result, ["rain_mm_h"])   # dr*/dtheta at the answer
+    modality_comparisons({"radar": a, "camera": b})  # paired, over the scenes both saw
 """
 
 from diffsense.study._box_job import DEFAULT_LAMBDAS, ParetoFront, check_lambdas, pareto
 from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._intervals import modality_comparisons, with_modality_comparisons
 from diffsense.study._judge import judge_seed, judging_objective
 from diffsense.study._line_job import planned_evaluations
 from diffsense.study._members import Member, named_members
@@ -51,6 +53,6 @@ __all__ = [
     "PredictionSpec", "Problem", "QuestionSpec", "Result", "SensingSpec", "Settings", "SolverSpec", "TrafficSpec",
     "check_lambdas", "check_theta", "checked", "domain_check", "domain_note", "judge_seed", "judging_objective",
     "load_settings", "load_suite",
-    "memory_estimate_bytes", "named_members", "objective", "odd_shift", "optimise", "pareto", "planned_evaluations",
-    "problem_config", "problem_fields", "recorded_cut", "seed_keys", "sensitivity", "shared_fields", "traffic_scenes",
+    "memory_estimate_bytes", "modality_comparisons", "named_members", "objective", "odd_shift", "optimise", "pareto", "planned_evaluations",
+    "problem_config", "problem_fields", "recorded_cut", "seed_keys", "sensitivity", "shared_fields", "traffic_scenes", "with_modality_comparisons",
 ]

@@ -12,11 +12,12 @@ scenario of one variant: they are resampled as one sample instead.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
 
-from diffsense.metrics import LEVEL, RESAMPLES, SceneSums, bootstrap_ci, difference_ci, estimable
+from diffsense.metrics import LEVEL, RESAMPLES, SceneSums, argmin_ci, bootstrap_ci, difference_ci, estimable
 from diffsense.runtime import to_host
 from diffsense.solve import Evaluator
 
@@ -50,16 +51,40 @@ def _pair(a: str, b: str, e_a: float, e_b: float, s_a: SceneSums, s_b: SceneSums
     unpaired = difference_ci(s_a, s_b, groups, paired=False, level=LEVEL, resamples=RESAMPLES, seed=seed)
     diff = e_a - e_b
     return {"a": a, "b": b, "diff_m": diff, "ci": None if ci is None else list(ci),
-            "ci_unpaired": None if unpaired is None else list(unpaired), "paired": True,
+            "ci_unpaired": None if unpaired is None else list(unpaired), "paired": True, "of": "sweep",
             "verdict": verdict(a, b, diff, ci)}
+
+
+def r_star_interval(ev: Evaluator, groups: np.ndarray, *, of_reference: bool, seed: int) -> tuple[
+        list[float] | None, float | None, int]:
+    """How far r* would move with other traffic: `argmin_ci` over every point the job evaluated
+    the answer's E at (the sweep's steps, the solve's points, the polish, the figures' and the
+    dense check's), each resample re-picking the point of least E. Returns the interval [lo, hi]
+    (None where it cannot be estimated), its resolution (the widest gap between neighbouring
+    evaluated points from the one at or below lo to the one at or above hi) and the points' count."""
+    points = sorted(x[0] for x in (ev.reference_points() if of_reference else ev.hard_points()))
+    sums = [ev.scene_sums(r, of_reference) for r in points]
+    if not points or any(s is None for s in sums):
+        return None, None, len(points)
+    ci = argmin_ci(points, sums, groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
+    if ci is None:
+        return None, None, len(points)
+    p = np.asarray(points)
+    i0 = max(int(np.searchsorted(p, ci[0], side="right")) - 1, 0)
+    i1 = min(int(np.searchsorted(p, ci[1], side="left")), p.size - 1)
+    if i0 == i1:  # the interval is one point: resolved to its neighbours
+        i0, i1 = max(i0 - 1, 0), min(i1 + 1, p.size - 1)
+    return list(ci), (float(np.max(np.diff(p[i0:i1 + 1]))) if i1 > i0 else None), len(points)
 
 
 def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: bool, seed: int, unit: str,
                    recorded: bool = False) -> dict[str, Any]:
     """result.json's interval keys of a one-parameter job: "ci_level", "ci_method", "E_ci" (of
-    the answer's E, `e_star` [m]), "sweep_E_ci" (one per sweep step), "comparisons" and
-    "indistinguishable" (the steps the data cannot tell from the best; None without intervals).
-    `of_reference`: the answer is judged on E_ref (a probabilistic law), not E_hard."""
+    the answer's E, `e_star` [m]), "sweep_E_ci" (one per sweep step), "r_star_ci" ([lo, hi] on
+    r*, `r_star_interval`), "comparisons" and "indistinguishable" (the steps the data cannot tell
+    from the best; None without intervals); and, for `modality_comparisons` (not result.json),
+    "answer_sums" (the answer's `SceneSums`) and "strata". `of_reference`: the answer is judged
+    on E_ref (a probabilistic law), not E_hard."""
     groups, weight = strata(ev, recorded)
     ok = estimable(groups, weight)
     note = None if ok else ("no interval from the scene sample: a scenario with one variant says nothing "
@@ -72,7 +97,8 @@ def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: b
     if any(s is None for s in sums.values()):  # a custom objective's reference keeps no draws
         method["note"] = "no interval: the objective's reference keeps no per-variant parts"
         return {"ci_level": LEVEL, "ci_method": method, "E_ci": None, "sweep_E_ci": [None] * len(steps),
-                "comparisons": [], "indistinguishable": None}
+                "r_star_ci": None, "comparisons": [], "indistinguishable": None, "answer_sums": None,
+                "strata": groups}
 
     def ci(r):
         out = bootstrap_ci(sums[r], groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
@@ -86,5 +112,55 @@ def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: b
                    for r in others]
     same = None if not ok else sorted(
         [best] + [r for r, c in zip(others, comparisons) if r in steps and c["ci"][0] <= 0.0 <= c["ci"][1]])
+    r_ci, resolution, evaluated = r_star_interval(ev, groups, of_reference=of_reference, seed=seed)
+    method |= {"r_star": "argmin over the evaluated points, each resample reweighting them alike",
+               "r_star_points": evaluated, "r_star_resolution": resolution}
     return {"ci_level": LEVEL, "ci_method": method, "E_ci": ci(result.r_star), "sweep_E_ci": [ci(r) for r in steps],
-            "comparisons": comparisons, "indistinguishable": same}
+            "r_star_ci": r_ci, "comparisons": comparisons, "indistinguishable": same,
+            "answer_sums": sums[result.r_star], "strata": groups}
+
+
+def _answer_e(result: Any) -> float:
+    ref = result.reference or {}
+    return float(ref["E_ref_star"] if ref.get("answer_on") == "E_ref" else result.E_hard_star)
+
+
+def _answer_label(result: Any) -> str:
+    if result.param is None:
+        return result.sensor
+    return f"{result.sensor} at {result.r_star[result.param]:.5g} {result.units[result.param]}".strip()
+
+
+def modality_comparisons(results: dict[str, Any]) -> list[dict[str, Any]]:
+    """Sensor against sensor (`--sensor both`: radar against camera): the first result's answer
+    against each other's, {"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "of", "verdict"}
+    as in result.json's "comparisons" ("of": "sensors"), diff_m the difference of the answers'
+    E (E_ref under a probabilistic law, E_hard under the threshold law) [m], each sensor at its
+    own r*. The runs share their scenes (same traffic and seed), so the difference is paired
+    scene by scene. A result without per-variant sums (a many-parameter solve, a custom
+    objective, one variant per scenario) or over other scenes is left out."""
+    def sums(r):
+        ci = getattr(r, "intervals", None) or {}
+        return ci.get("answer_sums"), ci.get("strata"), (ci.get("ci_method") or {}).get("seed")
+
+    names = list(results)
+    out = []
+    for b in names[1:]:
+        (s_a, g_a, seed), (s_b, g_b, _) = sums(results[names[0]]), sums(results[b])
+        if (s_a is None or s_b is None or not np.array_equal(g_a, g_b)
+                or not np.array_equal(s_a.instants, s_b.instants) or not estimable(g_a, s_a.instants)):
+            continue
+        ra, rb = results[names[0]], results[b]
+        out.append(_pair(_answer_label(ra), _answer_label(rb), _answer_e(ra), _answer_e(rb), s_a, s_b, g_a, seed)
+                   | {"of": "sensors"})
+    return out
+
+
+def with_modality_comparisons(results: dict[str, Any]) -> dict[str, Any]:
+    """`results` (sensor name -> `Result`) with `modality_comparisons` added to each one's
+    "comparisons" (result.json's), after the sweep's; unchanged where there is none."""
+    paired = modality_comparisons(results)
+    if not paired:
+        return dict(results)
+    return {name: dataclasses.replace(r, intervals=r.intervals | {"comparisons": r.intervals["comparisons"] + paired})
+            for name, r in results.items()}

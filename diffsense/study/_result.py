@@ -23,7 +23,8 @@ result.json schema (every key always present; non-finite numbers are written as 
                              detection draws of the seed s (`diffsense.study._judge`); null when
                              the run was asked not to judge
     "ci_level"      number   the level of every interval below (0.9)
-    "ci_method"     {"method", "resamples": B, "strata": "scenario" | "none", "seed", "note": string | null}
+    "ci_method"     {"method", "resamples": B, "strata": "scenario" | "none", "seed", "note": string | null,
+                             "r_star", "r_star_points", "r_star_resolution" (with intervals)}
                              how the intervals are made (`diffsense.metrics.bootstrap_ci`: a
                              stratified percentile bootstrap over scene variants, reweighting
                              per-variant sums the run computed; detection draws' error included
@@ -32,8 +33,16 @@ result.json schema (every key always present; non-finite numbers are written as 
                              probabilistic law, E_hard_star under the threshold law); null where
                              it cannot be estimated (one variant per scenario) or is not computed
                              (a many-parameter solve)
-    "comparisons"   [{"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "verdict"}, ...]
-                             each sweep step (and r*, where it is no step) against the best step:
+    "r_star_ci"     {name: [lo, hi]} | null   how far r* would move with other traffic: the
+                             percentile interval of r* re-picked on each resample as the point of
+                             least E among the points the run evaluated E at (`diffsense.metrics.
+                             argmin_ci`), so resolved to them: "ci_method" holds "r_star_points"
+                             (how many) and "r_star_resolution" (the widest gap between neighbouring
+                             points across the interval, parameter units); null as "E_ci" is
+    "comparisons"   [{"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "of", "verdict"}, ...]
+                             each sweep step (and r*, where it is no step) against the best step
+                             ("of": "sweep"), then, with `--sensor both`, the first sensor's
+                             answer against the other's, each at its r* ("of": "sensors"):
                              diff_m = E(a) - E(b) [m], "ci" its paired interval (the same scenes
                              resampled for both), "ci_unpaired" the interval had they seen
                              independent scenes, "verdict" in plain words; [] for many parameters
@@ -104,7 +113,7 @@ from diffsense.solve import SolveResult
 
 _PACKAGES = ("jax", "jaxlib", "flax", "optax", "optimistix", "numpy")
 RESULT_KEYS = ("sensor", "params", "units", "param", "interval", "r_star", "E_soft_star", "E_hard_star", "reference", "judged", "ci_level",
-               "ci_method", "E_ci", "comparisons", "sweep",
+               "ci_method", "E_ci", "r_star_ci", "comparisons", "sweep",
                "evaluations", "programs_run", "wall_s", "on_bound", "bracket", "tau_schedule", "notes",
                "objective", "breakdown_of", "E_pooled", "by_scenario", "by_horizon", "coverage", "tracked", "near_optimal", "flags", "domain", "sensitivity", "scenarios",
                "config", "versions")
@@ -156,7 +165,9 @@ class Result:
     """The answer of `diffsense.optimise`, with everything that explains it.
 
     `r_star` is a dict like r (`{"hfov_deg": 30.2}`); `solve` is the one-parameter solver's
-    full record (sweep, levels, bracket); `to_json()` is the result.json content.
+    full record (sweep, levels, bracket); `to_json()` is the result.json content. `intervals`
+    holds result.json's interval keys and, beyond them, the answer's per-variant sums
+    ("answer_sums", "strata") that `diffsense.study.modality_comparisons` pairs across sensors.
     """
 
     sensor: str
@@ -260,11 +271,13 @@ class Result:
         return json_ready(out)
 
     def _intervals_json(self) -> dict[str, Any]:
-        """result.json's "ci_level", "ci_method", "E_ci" and "comparisons" (module docstring)."""
+        """result.json's "ci_level", "ci_method", "E_ci", "r_star_ci" and "comparisons" (module docstring)."""
         ci = self.intervals or {"ci_level": LEVEL, "ci_method": {
             "method": None, "resamples": 0, "strata": None, "seed": None,
             "note": "no interval: not computed for a many-parameter solve"}, "E_ci": None, "comparisons": []}
-        return {k: ci[k] for k in ("ci_level", "ci_method", "E_ci", "comparisons")} | (
+        r_ci = ci.get("r_star_ci")
+        return {k: ci[k] for k in ("ci_level", "ci_method", "E_ci")} | {
+            "r_star_ci": None if r_ci is None else {self.param: list(r_ci)}, "comparisons": ci["comparisons"]} | (
             {"target_ci": ci["target_ci"]} if "target_ci" in ci else {})
 
     def _breakdown_of(self) -> dict[str, Any]:
