@@ -57,6 +57,7 @@ import diffsense as ds  # noqa: E402
 from diffsense.metrics import EstimatorConfig, load_costs, make_cost  # noqa: E402
 from diffsense.solve import BoxConfig, BoxFunctions, Evaluator, box_solve  # noqa: E402
 from diffsense.study import judge_seed, judging_objective  # noqa: E402
+from _markdown import replace_block  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SUITES = "radar_camera_d8"
@@ -335,13 +336,7 @@ def plot(res: dict, path: Path) -> None:
 
 def render(markdown: Path, json_dir: Path) -> None:
     results = [json.loads(p.read_text()) for p in sorted(json_dir.glob("design_d*.json"))]
-    text = markdown.read_text()
-    start, end = "<!-- design-table -->", "<!-- /design-table -->"
-    if start not in text or end not in text:
-        raise SystemExit(f"error: {markdown} has no {start} ... {end} block")
-    body = "\n".join(table(results) + [""] + [f"- {verdict(r)}" for r in results])
-    head, rest = text.split(start, 1)
-    markdown.write_text(f"{head}{start}\n{body}\n{end}{rest.split(end, 1)[1]}")
+    replace_block(markdown, "design-table", "\n".join(table(results) + [""] + [f"- {verdict(r)}" for r in results]))
     img = markdown.parent / "img"
     for figure in sorted(json_dir.glob("design_d*.png")):  # the page's figures beside it
         img.mkdir(exist_ok=True)

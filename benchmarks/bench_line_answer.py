@@ -42,6 +42,7 @@ jax.config.update("jax_enable_x64", True)
 
 import diffsense as ds  # noqa: E402
 from diffsense.solve import Evaluator, SolveConfig, brent_minimise  # noqa: E402
+from _markdown import replace_block  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 METHODS = ("brent", "secant", "brent-whole")
@@ -128,17 +129,12 @@ def table(res: dict) -> list[str]:
 
 
 def render(markdown: Path, res: dict) -> None:
-    text = markdown.read_text()
-    start, end = "<!-- line-answer-table -->", "<!-- /line-answer-table -->"
-    if start not in text or end not in text:
-        raise SystemExit(f"error: {markdown} has no {start} ... {end} block")
     loads = [iv.get("load", [res["meta"]["load_before"][0], res["meta"]["load_after"][0]]) for iv in res["intervals"]]
     load = min(a for a, _ in loads), max(b for _, b in loads)
     body = "\n".join(table(res) + ["", "Programs are counted, not timed. Measured with "
                                    f"`python benchmarks/bench_line_answer.py` "
                                    f"(load {load[0]:.1f}-{load[1]:.1f} on {res['meta']['cpus']} cores)."])
-    head, rest = text.split(start, 1)
-    markdown.write_text(f"{head}{start}\n{body}\n{end}{rest.split(end, 1)[1]}")
+    replace_block(markdown, "line-answer-table", body)
     print(f"rendered the table into {markdown}")
 
 
