@@ -23,7 +23,10 @@ with its default, null; the comparisons' "ci_unpaired" were re-stored when the i
 the expanded percentile ones (the paired ones, at 2 variants the resamples' extremes, stayed).
 "r_star_ci" (how far r* would move with other traffic: null for the box answer), ci_method's
 "r_star", "r_star_points" and "r_star_resolution", and each comparison's "of" ("sweep") were added
-from the first run that reported them; every other number stayed as stored.
+from the first run that reported them; every other number stayed as stored. So were the
+breakdown parts' "E_ci" (each scenario, coverage part and horizon step), the judged value's
+"E_ci", and the box answer's interval keys (its comparison with the default suite; one variant:
+no interval).
 """
 
 from __future__ import annotations

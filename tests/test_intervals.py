@@ -140,7 +140,9 @@ def test_result_json_carries_the_intervals_a_real_run_stored():
     same = result["near_optimal"]["indistinguishable"]
     assert best["r"] in same and set(same) <= set(steps)
     box = json.loads((GOLDEN / "box_result.json").read_text())  # one variant: no interval, a note why
-    assert box["E_ci"] is None and box["comparisons"] == [] and box["ci_method"]["note"]
+    assert box["E_ci"] is None and box["ci_method"]["note"] and box["r_star_ci"] is None
+    (default,) = box["comparisons"]  # r* against the default suite, its difference without an interval
+    assert default["of"] == "default" and default["ci"] is None and default["diff_m"] < 0
 
 
 def _with_intervals(sensor: str, e: float) -> dict:

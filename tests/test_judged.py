@@ -37,7 +37,7 @@ def _e_ref(problem: ds.Problem, r_star: dict[str, float]):
 def test_the_judged_value_is_e_ref_at_r_star_on_the_fresh_seed(solved):
     problem, _, result = solved
     judged = result.judged
-    assert set(judged) == {"E_ref", "E_ref_se", "seed", "variants"}
+    assert set(judged) == {"E_ref", "E_ref_se", "E_ci", "seed", "variants"}
     assert judged["seed"] != problem.seed and judged["variants"] == problem.traffic.variants
     fresh = _e_ref(problem.replace(seed=judged["seed"]), result.r_star)
     assert judged["E_ref"] == pytest.approx(float(fresh.e), rel=1e-12)

@@ -6,7 +6,8 @@ different vehicle counts pool into one `make_objective` batch.
 
 Intervals from the scene sample (`_intervals.py`): `scene_sums` of an evaluation, then
 `bootstrap_ci` (E), `difference_ci` (E(a) - E(b), paired) and `argmin_ci` (the minimiser over
-evaluated points) reweight them over stratified
+evaluated points) reweight them, and `part_sums` / `part_cis` the breakdown's parts likewise
+(`_part_intervals.py`); all over stratified
 resamples of the variants (`bootstrap_counts`); `with_variants(E, index)` is E over a resample's
 variants, evaluated afresh.
 """
@@ -55,6 +56,14 @@ from diffsense.metrics._intervals import (
     scene_sums,
 )
 from diffsense.metrics._objective import QUESTIONS, Objective
+from diffsense.metrics._part_intervals import (
+    PartSums,
+    drawn_part_sums,
+    hard_part_sums,
+    part_cis,
+    part_sums,
+    with_part_cis,
+)
 from diffsense.metrics._reference import (
     DrawnParts,
     ReferenceEvaluation,
@@ -70,5 +79,6 @@ __all__ = [
     "make_cost", "make_objective", "member_costs", "pad_vehicles", "recorded_scenes", "reference_draw_margins", "relaxed_bernoulli",
     "relevance_reach", "safe_sqrt", "simulate_scenes", "speed_shifted_scenes", "tracked_summary", "value_and_grad",
     "with_scenes", "with_variants", "LEVEL", "RESAMPLES", "SceneSums", "argmin_ci", "bootstrap_ci", "bootstrap_counts",
-    "difference_ci", "estimable", "expanded_tail", "scene_sums",
+    "difference_ci", "estimable", "expanded_tail", "scene_sums", "PartSums", "drawn_part_sums",
+    "hard_part_sums", "part_cis", "part_sums", "with_part_cis",
 ]

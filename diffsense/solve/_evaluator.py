@@ -20,11 +20,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from diffsense.metrics import (
+    PartSums,
     ReferenceEvaluation,
     SceneSums,
     breakdown,
     drawn_breakdown,
+    drawn_part_sums,
     drawn_tracked_summary,
+    hard_part_sums,
     is_deterministic,
     scene_sums,
     tracked_summary,
@@ -77,6 +80,7 @@ class Evaluator:
         self._reference: dict[tuple, Any] = {}
         self._drawn_breakdown: dict[tuple, dict[str, Any]] = {}
         self._drawn_sums: dict[tuple, SceneSums] = {}
+        self._drawn_part_sums: dict[tuple, PartSums] = {}
         self._scenes: tuple[np.ndarray, np.ndarray] | None = None
         self.reference_count = 0  # reference programs run (each K hard passes for a random law)
         self._progress = progress
@@ -146,6 +150,7 @@ class Evaluator:
             | {"tracked": drawn_tracked_summary(ref.parts, weight, float(E.miss_penalty_m2))})
         self._drawn_sums[key] = scene_sums(ref.parts.sq_instant, ref.parts.coverage, weight, E.question,
                                            float(E.miss_penalty_m2))
+        self._drawn_part_sums[key] = drawn_part_sums(ref.parts, scenario, weight, E.scenario_names)
         self._reference[key] = dataclasses.replace(ref, parts=None)
 
     def scene_sums(self, x, of_reference: bool = True) -> SceneSums | None:
@@ -160,6 +165,16 @@ class Evaluator:
         hard = self.hard(x)
         return scene_sums(hard.sq_instant, hard.coverage, self._scene_weights()[1], E.question,
                           float(E.miss_penalty_m2))
+
+    def part_sums(self, x, of_reference: bool = True) -> PartSums | None:
+        """The breakdown's parts at x as per-variant sums (`diffsense.metrics.PartSums`), of the
+        breakdown `breakdown(x, of_reference)` gives; None where `scene_sums` is None."""
+        E = self.objective
+        if of_reference and not _deterministic(E):
+            self.reference(x)
+            return self._drawn_part_sums.get(self._key(x))
+        scenario, weight = self._scene_weights()
+        return hard_part_sums(self.hard(x), scenario, weight, E.scenario_names)
 
     def reference(self, x):
         """The reference evaluation (`ReferenceEvaluation`, numpy leaves) at x: E_ref and its

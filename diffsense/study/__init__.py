@@ -11,7 +11,13 @@
 
 from diffsense.study._box_job import DEFAULT_LAMBDAS, ParetoFront, check_lambdas, pareto
 from diffsense.study._domain import domain_check, domain_note
-from diffsense.study._intervals import modality_comparisons, with_modality_comparisons
+from diffsense.study._intervals import (
+    answer_ci,
+    box_intervals,
+    breakdown_intervals,
+    modality_comparisons,
+    with_modality_comparisons,
+)
 from diffsense.study._judge import judge_seed, judging_objective
 from diffsense.study._line_job import planned_evaluations
 from diffsense.study._members import Member, named_members
@@ -51,7 +57,7 @@ from diffsense.study._suite_file import checked, load_suite
 __all__ = [
     "DEFAULT_LAMBDAS", "ODD_PARAMETERS", "WEATHER_DOMAINS", "WEATHER_PARAMETERS", "Curves", "Member", "ParetoFront",
     "PredictionSpec", "Problem", "QuestionSpec", "Result", "SensingSpec", "Settings", "SolverSpec", "TrafficSpec",
-    "check_lambdas", "check_theta", "checked", "domain_check", "domain_note", "judge_seed", "judging_objective",
+    "answer_ci", "box_intervals", "breakdown_intervals", "check_lambdas", "check_theta", "checked", "domain_check", "domain_note", "judge_seed", "judging_objective",
     "load_settings", "load_suite",
     "memory_estimate_bytes", "modality_comparisons", "named_members", "objective", "odd_shift", "optimise", "pareto", "planned_evaluations",
     "problem_config", "problem_fields", "recorded_cut", "seed_keys", "sensitivity", "shared_fields", "traffic_scenes", "with_modality_comparisons",

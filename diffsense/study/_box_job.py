@@ -27,6 +27,7 @@ from diffsense.metrics import (
 from diffsense.runtime import CompileClock, InputError
 from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, pareto_sweep
 from diffsense.study._domain import domain_check, domain_note
+from diffsense.study._intervals import box_intervals, breakdown_intervals
 from diffsense.study._judge import judged
 from diffsense.study._line_report import reference_summary
 from diffsense.study._objective import objective, scenes_line
@@ -103,8 +104,13 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         config = dataclasses.replace(problem.solver.box, cost_weight=problem.question.cost_weight, seed=problem.seed)
         box = box_solve(fns, problem.params, config, extra_starts=[start])
         x = [box.x_star[n] for n in E.names]
-        star = ev.breakdown(x, of_reference=not _on_hard(problem, E))
+        on_ref, recorded = not _on_hard(problem, E), problem.traffic.scenes is not None
+        solve_counts = dict(ev.counts)
+        star = breakdown_intervals(ev, x, ev.breakdown(x, of_reference=on_ref), of_reference=on_ref,
+                                   seed=problem.seed, recorded=recorded)
         parts = {"breakdown": star, "tracked": star["tracked"]}
+        ci = box_intervals(ev, x, start, of_reference=on_ref, seed=problem.seed, recorded=recorded)
+        after = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
         fresh = None
         if judge:
             say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")
@@ -116,11 +122,11 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         sensor=problem.sensor_kind, params=dict(problem.params), units=_units(problem),
         r_star=dict(box.x_star), E_hard_star=ev.e_hard(x), E_soft_star=float(box.E_soft), solve=None, box=box,
         reference=reference_summary(ev, problem, x, _on_hard(problem, E)),
-        programs_run={"solve": dict(ev.counts), "figures": {"soft": 0, "hard": 0}},
+        programs_run={"solve": solve_counts, "figures": after},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
                 "programs_lowered": clock.lowered},
         scenarios=tuple(E.scenario_names), config=problem_config(problem), domain=domain, box_notes=notes,
-        judged=fresh, member_costs=_member_costs(problem, E, box.x_star), **parts)
+        judged=fresh, member_costs=_member_costs(problem, E, box.x_star), intervals=ci, **parts)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -17,7 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from diffsense.metrics import LEVEL, RESAMPLES, SceneSums, argmin_ci, bootstrap_ci, difference_ci, estimable
+from diffsense.metrics import (
+    LEVEL,
+    RESAMPLES,
+    SceneSums,
+    argmin_ci,
+    bootstrap_ci,
+    difference_ci,
+    estimable,
+    part_cis,
+    with_part_cis,
+)
 from diffsense.runtime import to_host
 from diffsense.solve import Evaluator
 
@@ -118,6 +128,55 @@ def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: b
     return {"ci_level": LEVEL, "ci_method": method, "E_ci": ci(result.r_star), "sweep_E_ci": [ci(r) for r in steps],
             "r_star_ci": r_ci, "comparisons": comparisons, "indistinguishable": same,
             "answer_sums": sums[result.r_star], "strata": groups}
+
+
+def breakdown_intervals(ev: Evaluator, r: float, breakdown: dict[str, Any], *, of_reference: bool, seed: int,
+                        recorded: bool = False) -> dict[str, Any]:
+    """`breakdown` (the evaluator's at r) with every E-valued part's interval, "E_ci" in each
+    scenario's entry and coverage part and a per-step "E_ci" list in by_horizon
+    (`diffsense.metrics.part_cis`, the resamples of E's own interval). Unchanged where the
+    objective keeps no per-variant parts (a custom one's reference)."""
+    parts = ev.part_sums(r, of_reference)
+    if parts is None:
+        return breakdown
+    groups, weight = strata(ev, recorded)
+    return with_part_cis(breakdown, parts, part_cis(parts, groups, weight, level=LEVEL, resamples=RESAMPLES,
+                                                    seed=seed))
+
+
+def answer_ci(ev: Evaluator, r: Any, *, seed: int, recorded: bool = False) -> list[float] | None:
+    """The interval [lo, hi] [m] on E_ref at r (E_hard under a deterministic law) from the scene
+    sample of `ev`'s objective; None where it cannot be estimated."""
+    sums = ev.scene_sums(r)
+    if sums is None:
+        return None
+    out = bootstrap_ci(sums, strata(ev, recorded)[0], level=LEVEL, resamples=RESAMPLES, seed=seed)
+    return None if out is None else list(out)
+
+
+def box_intervals(ev: Evaluator, x: Any, default: Any, *, of_reference: bool, seed: int,
+                  recorded: bool = False) -> dict[str, Any]:
+    """result.json's interval keys of a many-parameter answer at x: "ci_level", "ci_method",
+    "E_ci" of the answer's E (E_ref under a probabilistic law, else E_hard), "r_star_ci" (null:
+    not estimated for many parameters) and "comparisons": the answer against the default suite
+    (`default`, the sensors' defaults clipped to the box), paired over the same scenes. Evaluates
+    E at the default where the solve did not."""
+    groups, weight = strata(ev, recorded)
+    ok = estimable(groups, weight)
+    method = {"method": METHOD, "resamples": RESAMPLES, "strata": "none" if recorded else "scenario",
+              "seed": int(seed), "note": None if ok else (
+                  "no interval from the scene sample: a scenario with one variant says nothing about how E "
+                  "moves with other traffic (two or more variants per scenario give one)"),
+              "r_star": "not estimated for a many-parameter answer"}
+    e = ev.e_reference if of_reference else ev.e_hard
+    sums = (ev.scene_sums(x, of_reference), ev.scene_sums(default, of_reference))
+    if any(s is None for s in sums):
+        method["note"] = "no interval: the objective's reference keeps no per-variant parts"
+        return {"ci_level": LEVEL, "ci_method": method, "E_ci": None, "r_star_ci": None, "comparisons": []}
+    ci = bootstrap_ci(sums[0], groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
+    against = _pair("r*", "the default suite", e(x), e(default), *sums, groups, seed) | {"of": "default"}
+    return {"ci_level": LEVEL, "ci_method": method, "E_ci": None if ci is None else list(ci), "r_star_ci": None,
+            "comparisons": [against]}
 
 
 def _answer_e(result: Any) -> float:

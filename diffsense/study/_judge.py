@@ -20,6 +20,7 @@ import numpy as np
 
 from diffsense.metrics import Objective
 from diffsense.solve import Evaluator
+from diffsense.study._intervals import answer_ci
 from diffsense.study._objective import objective
 from diffsense.study._problem import Problem
 
@@ -44,9 +45,12 @@ def judging_objective(problem: Problem, E: Objective) -> Objective:
 
 def judged(problem: Problem, E: Objective, r_star: dict[str, float]) -> dict[str, Any]:
     """result.json's "judged": E_ref [m] at `r_star` on the judging seed with its Monte-Carlo
-    standard error [m], the seed and the variants per scenario."""
+    standard error [m], its interval from the judging seed's scene sample ("E_ci", [lo, hi] [m]
+    or null, as result.json's own "E_ci"), the seed and the variants per scenario."""
     judge = judging_objective(problem, E)
     # the evaluator's own programs: the ones the solve compiled for E's shapes
-    ref = Evaluator(judge).reference(np.asarray([r_star[n] for n in judge.names]))
-    return {"E_ref": float(ref.e), "E_ref_se": float(ref.e_se), "seed": judge_seed(problem.seed),
+    ev, x = Evaluator(judge), np.asarray([r_star[n] for n in judge.names])
+    ref = ev.reference(x)
+    ci = answer_ci(ev, x, seed=judge_seed(problem.seed), recorded=problem.traffic.scenes is not None)
+    return {"E_ref": float(ref.e), "E_ref_se": float(ref.e_se), "E_ci": ci, "seed": judge_seed(problem.seed),
             "variants": problem.traffic.variants}

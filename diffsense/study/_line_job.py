@@ -22,7 +22,7 @@ from diffsense.solve import (
 )
 from diffsense.study import _line_report as report
 from diffsense.study._domain import domain_check, domain_note
-from diffsense.study._intervals import line_intervals
+from diffsense.study._intervals import breakdown_intervals, line_intervals
 from diffsense.study._judge import judged
 from diffsense.study._objective import objective, scenes_line
 from diffsense.study._problem import Problem, problem_config
@@ -133,6 +133,8 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
                         of_reference=not on_hard, seed=problem.seed, unit=spec.unit,
                         recorded=problem.traffic.scenes is not None)
     near = answer["near_optimal"] | {"indistinguishable": ci.pop("indistinguishable")}
+    parts["breakdown"] = breakdown_intervals(ev, result.r_star, parts["breakdown"], of_reference=not on_hard,
+                                             seed=problem.seed, recorded=problem.traffic.scenes is not None)
     out = Result(
         sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
         r_star={name: float(result.r_star)}, E_hard_star=ev.e_hard(result.r_star),

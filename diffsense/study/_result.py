@@ -18,39 +18,44 @@ result.json schema (every key always present; non-finite numbers are written as 
                              (answer_on "E_ref", and the sweep's "E_hard" entries hold E_ref);
                              under the threshold law E_ref = E_hard (one draw, SE 0); null for
                              many-parameter problems
-    "judged"        {"E_ref": m, "E_ref_se": m, "seed": s, "variants": n}   the answer judged on data
-                             it was not chosen on: E_ref at r* over the scene variants, noise and
-                             detection draws of the seed s (`diffsense.study._judge`); null when
-                             the run was asked not to judge
+    "judged"        {"E_ref": m, "E_ref_se": m, "E_ci": [lo, hi] | null, "seed": s, "variants": n}
+                             the answer judged on data it was not chosen on: E_ref at r* over the
+                             scene variants, noise and detection draws of the seed s
+                             (`diffsense.study._judge`), with its interval from that seed's scene
+                             sample (null as "E_ci" is); null when the run was asked not to judge
     "ci_level"      number   the level of every interval below (0.9)
     "ci_method"     {"method", "resamples": B, "strata": "scenario" | "none", "seed", "note": string | null,
                              "r_star", "r_star_points", "r_star_resolution" (with intervals)}
                              how the intervals are made (`diffsense.metrics.bootstrap_ci`: a
-                             stratified percentile bootstrap over scene variants, reweighting
+                             stratified expanded percentile bootstrap over scene variants, reweighting
                              per-variant sums the run computed; detection draws' error included
                              under a probabilistic law); "note" says why there is none
     "E_ci"          [lo, hi] | null   interval [m] on the answer's E at r* (E_ref_star under a
                              probabilistic law, E_hard_star under the threshold law); null where
-                             it cannot be estimated (one variant per scenario) or is not computed
-                             (a many-parameter solve)
+                             it cannot be estimated (one variant per scenario)
     "r_star_ci"     {name: [lo, hi]} | null   how far r* would move with other traffic: the
                              percentile interval of r* re-picked on each resample as the point of
                              least E among the points the run evaluated E at (`diffsense.metrics.
                              argmin_ci`), so resolved to them: "ci_method" holds "r_star_points"
                              (how many) and "r_star_resolution" (the widest gap between neighbouring
-                             points across the interval, parameter units); null as "E_ci" is
+                             points across the interval, parameter units); null as "E_ci" is,
+                             and for a many-parameter answer
     "comparisons"   [{"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "of", "verdict"}, ...]
                              each sweep step (and r*, where it is no step) against the best step
                              ("of": "sweep"), then, with `--sensor both`, the first sensor's
                              answer against the other's, each at its r* ("of": "sensors"):
                              diff_m = E(a) - E(b) [m], "ci" its paired interval (the same scenes
                              resampled for both), "ci_unpaired" the interval had they seen
-                             independent scenes, "verdict" in plain words; [] for many parameters
+                             independent scenes, "verdict" in plain words. A many-parameter
+                             answer has one: r* against the default suite (the sensors' defaults
+                             clipped to the box, "of": "default")
     "sweep"         [{"r": number, "E_hard": m, "E_soft": m, "E_ci": [lo, hi] | null}, ...]
                              the stepped sweep, each step's E with its interval
     "evaluations"   {"objective": int, "gradient": int}  of the continuous solve (sweep excluded)
     "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...}}  compiled-program
-                             runs (memoised points are not run again)
+                             runs (memoised points are not run again): the solve's, and those
+                             after it for the figures and the report (a many-parameter answer's
+                             default-suite comparison)
     "wall_s"        {"compile": s, "run": s, "programs_compiled": n, "programs_lowered": m}
                              (n: programs XLA compiled rather than loaded from the persistent
                              compilation cache; m: programs JAX traced and lowered, compiled or
@@ -65,14 +70,17 @@ result.json schema (every key always present; non-finite numbers are written as 
                              draws under a probabilistic law, E_hard otherwise); their parts'
                              values are keyed by it ("E_hard" below reads "E_ref" then)
     "E_pooled"      m        the breakdown's pooled E (Eq. 12 over every instant, of every draw)
-    "by_scenario"   {scenario: {"E_hard": m, "coverage": {...}}}   at r* (Eq. 12)
-    "by_horizon"    {"t_s": [...], "E_hard": [...], "rmse_true_gt": [...], "rmse_true_sensor": [...]}
-                             at r*, per horizon step: Eq. 12, and both predictions against the
-                             true future (ground-truth input, sensor input) [m]
+    "by_scenario"   {scenario: {"E_hard": m, "E_ci": [lo, hi] | null, "coverage": {...}}}   at r*
+                             (Eq. 12), each with its interval from the scenario's own variants
+    "by_horizon"    {"t_s": [...], "E_hard": [...], "E_ci": [[lo, hi] | null, ...], "rmse_true_gt": [...],
+                             "rmse_true_sensor": [...]}   at r*, per horizon step: Eq. 12 with its
+                             interval, and both predictions against the true future
+                             (ground-truth input, sensor input) [m]
     "coverage"      {"at_instant": f, "in_window": f, "throughout": f, "parts": {"throughout" |
-                             "partly" | "never": {"share": f, "E_hard": m}}}   pooled, at r*:
-                             shares of instants whose target is detected at the instant, at least
-                             once in the history window, throughout it; E on each part
+                             "partly" | "never": {"share": f, "E_hard": m, "E_ci": [lo, hi] | null}}}
+                             pooled, at r*: shares of instants whose target is detected at the
+                             instant, at least once in the history window, throughout it; E on
+                             each part with its interval (`diffsense.metrics.part_cis`)
     "tracked"       {"E_tracked": m, "missed_share": f, "J_m2": m^2, "miss_penalty_m2": m^2}
                              at r*: the "tracked" question's pieces (whichever was optimised)
     "sweep" entries also hold "by_scenario" and "coverage" at their step.
