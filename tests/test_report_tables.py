@@ -112,6 +112,14 @@ def test_the_breakdown_by_scenario_and_coverage():
     assert text.splitlines()[2].startswith("sc01")
     assert breakdown_table({"E_hard_star": 1.0, "by_scenario": {}}) == ""
     assert len(breakdown_table(result | {"tracked": None}).splitlines()) == 5
+    # with the parts' intervals: a column beside each scenario's E and the pooled one, and each
+    # coverage part's after its E
+    with_ci = result | {"E_ci": [3.5, 4.25], "by_scenario": {"sc01": result["by_scenario"]["sc01"] | {"E_ci": [3.0, 5.0]}},
+                        "coverage": cov | {"parts": {"throughout": cov["parts"]["throughout"] | {"E_ci": [0.5, 1.5]},
+                                                     "never": cov["parts"]["never"] | {"E_ci": None}}}}
+    lines = breakdown_table(with_ci).splitlines()
+    assert "90% CI" in lines[0] and "[3.00, 5.00]" in lines[2] and "[3.50, 4.25]" in lines[3]
+    assert "E 1.0000 m [0.50, 1.50]" in lines[4] and lines[4].endswith("E - m")
 
 
 def _box(**changes):

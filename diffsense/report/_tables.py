@@ -139,18 +139,23 @@ def breakdown_table(result: Mapping[str, Any]) -> str:
     whose target was detected at the instant, in the window and throughout it (E_ref's parts
     over its detection draws, with expected shares, where result.json's "breakdown_of" says so)."""
     of = result.get("breakdown_of") or "E_hard"
-    rows = []
-    for name, part in (result.get("by_scenario") or {}).items():
-        c = part["coverage"]
-        rows.append([name, part[of], c["at_instant"], c["in_window"], c["throughout"]])
     c = result.get("coverage")
     if not c:
         return ""
+    with_ci = any("E_ci" in part for part in (result.get("by_scenario") or {}).values())
+    rows = []
+    for name, part in (result.get("by_scenario") or {}).items():
+        cov = part["coverage"]
+        rows.append([name, part[of]] + ([_ci(part.get("E_ci"))] if with_ci else [])
+                    + [cov["at_instant"], cov["in_window"], cov["throughout"]])
     pooled = result.get("E_pooled")
-    rows.append(["pooled", result["E_hard_star"] if pooled is None else pooled,
-                 c["at_instant"], c["in_window"], c["throughout"]])
-    parts = ", ".join(f"{k} {v['share']:.0%} of instants, E {_cell(v[of])} m" for k, v in c["parts"].items())
-    lines = [format_table(["at r*", f"{of} [m]", "seen at t", "in window", "throughout"], rows),
+    rows.append(["pooled", result["E_hard_star"] if pooled is None else pooled]
+                + ([_ci(result.get("E_ci"))] if with_ci else []) + [c["at_instant"], c["in_window"], c["throughout"]])
+    parts = ", ".join(f"{k} {v['share']:.0%} of instants, E {_cell(v[of])} m"
+                      + (f" {_ci(v['E_ci'])}" if v.get("E_ci") else "") for k, v in c["parts"].items())
+    level = f"{result.get('ci_level', 0.9):.0%} CI [m]"
+    lines = [format_table(["at r*", f"{of} [m]"] + ([level] if with_ci else [])
+                          + ["seen at t", "in window", "throughout"], rows),
              f"by coverage: {parts}"]
     t = result.get("tracked")
     if t:
@@ -165,7 +170,8 @@ def judged_lines(result: Mapping[str, Any]) -> list[str]:
     if not j:
         return []
     return [(f"judged on fresh data (seed {j['seed']}: other scene variants, noise and detection draws, "
-             f"{j['variants']} variants per scenario): E_ref(r*) = {_cell(j['E_ref'])} +- {_cell(j['E_ref_se'])} m")]
+             f"{j['variants']} variants per scenario): E_ref(r*) = {_cell(j['E_ref'])} +- {_cell(j['E_ref_se'])} m"
+             + (f", {_ci(j['E_ci'])} from its scene sample" if j.get("E_ci") else ""))]
 
 
 def _ci(ci: Sequence[float] | None) -> str:
@@ -221,6 +227,10 @@ def box_table(result: Mapping[str, Any]) -> str:
                      f"E_hard(r*) has each detection at its median")
     if box.get("cost_by_member"):
         lines.append("cost by member: " + ", ".join(f"{n} {_cell(c)}" for n, c in box["cost_by_member"].items()))
+    if result.get("E_ci"):
+        lines.append(f"{result['ci_level']:.0%} interval on the answer's E from the scene sample: {_ci(result['E_ci'])} m")
+    lines += [c['verdict'] for c in result.get("comparisons") or []
+              if c.get("of") == "default"]
     lines += judged_lines(result)
     lines += [f"note: {n}" for n in result.get("notes", [])]
     return "\n".join(lines)
