@@ -130,7 +130,7 @@ def render(markdown: Path, res: dict) -> None:
         body += [f"**Radar HFOV over [{lo:g}, {hi:g}] deg**, {', '.join(prob['scenarios'])}, seeds "
                  f"{', '.join(map(str, seeds))} (1-minute load {min(loads):.1f}-{max(loads):.1f} during the runs; "
                  f"`uptime` before them: {'; '.join(u[0].split('load average: ')[-1] for u in prob['uptime'])}):",
-                 "", *table(prob), "", reading(prob), ""]
+                 "", *table(prob), "", *([reading(prob), ""] if reading(prob) else [])]
     body.append(f"Measured with `python benchmarks/bench_intervals.py` on {res['meta']['cpus']} cores.")
     replace_block(markdown, "intervals-table", "\n".join(body))
     print(f"rendered the tables into {markdown}")

@@ -67,3 +67,22 @@ def test_bench_relaxation_judges_a_solve_on_fresh_draws(tmp_path):
     assert judge["fresh_grid_best_r"] in (20.0, 21.0, 22.0, 23.0)
     assert judge["own"]["rel"] == pytest.approx(row["rel_to_grid_best"], abs=1e-12)
     assert row["brent"]["brent_evaluations"] >= 1
+
+
+@pytest.mark.slow
+def test_bench_intervals_runs_and_renders_its_table(tmp_path):
+    # One scenario, 1 and 2 variants, one seed: a row without an interval and a row with one,
+    # the JSON's numbers in the table rendered into a page's block.
+    import json
+
+    out, page = tmp_path / "intervals.json", tmp_path / "page.md"
+    page.write_text("before\n<!-- intervals-table -->\nstale rows\n<!-- /intervals-table -->\nafter\n")
+    _run("benchmarks/bench_intervals.py", "--variants", "1,2", "--seeds", "0", "--scenarios", "sc05",
+         "--json", str(out), "--render", str(page))
+    (prob,) = json.loads(out.read_text())["problems"]
+    one, two = prob["rows"]
+    assert (one["variants"], one["E_half_m"], one["with_interval"]) == (1, None, 0)
+    assert two["variants"] == 2 and two["E_half_m"] > 0 and two["with_interval"] == 1
+    text = page.read_text()
+    assert text.startswith("before\n") and text.endswith("after\n") and "stale rows" not in text
+    assert f"| 2 | {two['wall_s']:.0f} | {two['E_m']:.2f} | {two['E_half_m']:.2f} |" in text
