@@ -3,8 +3,8 @@
 `forward_gflop` counts the multiply-adds (x 2) of one forward pass as diffsense computes it: the
 encoder LSTM over the target and its neighbours (16 steps, hidden 64, input 32; the first step
 has no recurrent term), the social convolutions (3x3, 64 -> 64 on the 13 x 3 grid, valid; then
-3x1, 64 -> 16; each as one product of every input row with all kernel rows, [B * 13, 3 * 64] @
-[3 * 64, 3 * 64] and [B * 11, 64] @ [64, 3 * 16], `FullWidthConv`), the dynamics embedding, and the decoder (its constant input projected once, 24
+3x1, 64 -> 16 on the 11 x 1 result; each as one product of its patches, [B * 11, 3 * 3 * 64] @
+[3 * 3 * 64, 64] and [B * 9, 3 * 64] @ [3 * 64, 16], `FullWidthConv`), the dynamics embedding, and the decoder (its constant input projected once, 24
 recurrent steps with hidden 128, the 128 -> 5 output at 25 steps). Elementwise work is left out:
 it is a few percent and no matmul rate bounds it.
 
@@ -30,7 +30,7 @@ def forward_gflop(batch: int, neighbours: int, modes: int = 1) -> float:
     manoeuvres (1: single-mode or the chosen manoeuvre; 6: all)."""
     gates_enc = 4 * ENC_H
     encoder = 2 * gates_enc * (ENC_IN + (T_HIST - 1) * (ENC_IN + ENC_H)) + 2 * T_HIST * 2 * ENC_IN
-    social = 2 * 13 * (3 * 64) * (3 * 64) + 2 * 11 * 64 * (3 * 16) + 2 * ENC_H * 32
+    social = 2 * 11 * (3 * 3 * 64) * 64 + 2 * 9 * (3 * 64) * 16 + 2 * ENC_H * 32
     dec_in = DEC_IN + (5 if modes > 1 else 0)
     decoder = 2 * 4 * DEC_H * (dec_in + (T_FUT - 1) * DEC_H) + 2 * T_FUT * DEC_H * 5
     per_target = (neighbours + 1) * encoder + social + modes * decoder
@@ -51,7 +51,7 @@ def matmul_shapes(batch: int, neighbours: int) -> dict[str, tuple[int, int, int]
     """(m, k, n) of the network's two recurrent matmuls, its social convolution and a large square
     product."""
     return {"encoder step": (batch * (neighbours + 1), ENC_IN + ENC_H, 4 * ENC_H),
-            "decoder step": (batch, DEC_H, 4 * DEC_H), "social conv": (batch * 13, 3 * 64, 3 * 64),
+            "decoder step": (batch, DEC_H, 4 * DEC_H), "social conv": (batch * 11, 3 * 3 * 64, 64),
             "2048 square": (2048, 2048, 2048)}
 
 

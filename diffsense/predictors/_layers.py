@@ -64,15 +64,9 @@ class LSTM(nnx.Module):
 
 
 class FullWidthConv(nnx.Module):
-    """Valid 2-D convolution whose kernel spans the whole width W, done as one matmul.
+    """Valid 2-D convolution whose kernel spans the whole width W, done as one patch matmul.
 
     kernel [kh, kw, c_in, c_out] (HWIO; torch's [out, in, kh, kw] transposed), bias [c_out].
-    Every input row is multiplied by all kh kernel rows at once, [B * H, W * C] @ [W * C, kh *
-    c_out], and output row i adds the products of input rows i .. i + kh - 1 with kernel rows
-    0 .. kh - 1, starting from row 0's product plus the bias. No [B, H_out, kh * W * C] patch array
-    is written; each kernel row multiplies all H input rows rather than the H_out it needs (13
-    against 11 for the social grid), and the product is still faster at the pipeline's batch
-    (benchmarks/bench_predict.py).
     """
 
     def __init__(self, kh: int, kw: int, c_in: int, c_out: int, *, rngs: nnx.Rngs):
@@ -84,8 +78,7 @@ class FullWidthConv(nnx.Module):
         kh, kw, c_in, c_out = self.kernel.shape
         if x.shape[2] != kw:
             raise ValueError(f"kernel width {kw} must span the input width {x.shape[2]}")
-        b, h = x.shape[:2]
-        h_out = h - kh + 1
-        w = self.kernel[...].reshape(kh, kw * c_in, c_out).transpose(1, 0, 2).reshape(kw * c_in, kh * c_out)
-        y = (x.reshape(b, h, kw * c_in) @ w).reshape(b, h, kh, c_out)  # y[:, i, d] = row i times kernel row d
-        return sum((y[:, d : d + h_out, d] for d in range(1, kh)), y[:, :h_out, 0] + self.bias[...])
+        h_out = x.shape[1] - kh + 1
+        patches = jnp.stack([x[:, d : d + h_out] for d in range(kh)], axis=2)  # [B, Ho, kh, W, C]
+        flat = patches.reshape(x.shape[0], h_out, kh * kw * c_in)
+        return flat @ self.kernel[...].reshape(kh * kw * c_in, c_out) + self.bias[...]
