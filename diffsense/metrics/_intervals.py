@@ -191,13 +191,13 @@ def argmin_ci(points: Float[np.ndarray, " P"], sums: list[SceneSums], strata: In
     one of the two. None where it cannot be estimated."""
     if len(points) != len(sums) or not sums:
         raise ValueError(f"{len(points)} points and {len(sums)} sums: one SceneSums per point")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must lie in (0, 1), got {level}")
     counts = bootstrap_counts(strata, weight=_weight(sums[0]), resamples=resamples, seed=seed)
     if counts is None:
         return None
     e = np.stack([s.e2(counts) for s in sums])  # [P, B]
     picks = np.asarray(points, np.float64)[np.argmin(e, axis=0)]
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level must lie in (0, 1), got {level}")
     tail = expanded_tail(strata, _weight(sums[0]), level)
     # the quantiles read outward to evaluated points: no r* between two points is claimed
     return (float(np.quantile(picks, tail, method="lower")), float(np.quantile(picks, 1.0 - tail, method="higher")))

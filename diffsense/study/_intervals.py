@@ -42,6 +42,14 @@ def strata(ev: Evaluator, recorded: bool) -> tuple[np.ndarray, np.ndarray]:
     return (np.zeros_like(scenario) if recorded else scenario), np.asarray(weight)
 
 
+def _method(estimated: bool, seed: int, recorded: bool) -> dict[str, Any]:
+    """result.json's "ci_method": how the intervals are made, and why there are none where not `estimated`."""
+    note = None if estimated else ("no interval from the scene sample: a scenario with one variant says nothing "
+                                   "about how E moves with other traffic (two or more variants per scenario give one)")
+    return {"method": METHOD, "resamples": RESAMPLES, "strata": "none" if recorded else "scenario",
+            "seed": int(seed), "note": note}
+
+
 def verdict(a: str, b: str, diff: float, ci: tuple[float, float] | None) -> str:
     """A comparison in plain words: a is worse or better than b by diff [lo, hi], or the two
     cannot be told apart (the interval holds 0), or the interval cannot be estimated."""
@@ -97,10 +105,7 @@ def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: b
     on E_ref (a probabilistic law), not E_hard."""
     groups, weight = strata(ev, recorded)
     ok = estimable(groups, weight)
-    note = None if ok else ("no interval from the scene sample: a scenario with one variant says nothing "
-                            "about how E moves with other traffic (two or more variants per scenario give one)")
-    method = {"method": METHOD, "resamples": RESAMPLES, "strata": "none" if recorded else "scenario",
-              "seed": int(seed), "note": note}
+    method = _method(ok, seed, recorded)
     steps = [p.r for p in result.sweep]
     values = {p.r: float(p.E_hard) for p in result.sweep} | {result.r_star: float(e_star)}
     sums = {r: ev.scene_sums(r, of_reference) for r in values}
@@ -162,12 +167,7 @@ def box_intervals(ev: Evaluator, x: Any, default: Any, *, of_reference: bool, se
     (`default`, the sensors' defaults clipped to the box), paired over the same scenes. Evaluates
     E at the default where the solve did not."""
     groups, weight = strata(ev, recorded)
-    ok = estimable(groups, weight)
-    method = {"method": METHOD, "resamples": RESAMPLES, "strata": "none" if recorded else "scenario",
-              "seed": int(seed), "note": None if ok else (
-                  "no interval from the scene sample: a scenario with one variant says nothing about how E "
-                  "moves with other traffic (two or more variants per scenario give one)"),
-              "r_star": "not estimated for a many-parameter answer"}
+    method = _method(estimable(groups, weight), seed, recorded) | {"r_star": "not estimated for a many-parameter answer"}
     e = ev.e_reference if of_reference else ev.e_hard
     sums = (ev.scene_sums(x, of_reference), ev.scene_sums(default, of_reference))
     if any(s is None for s in sums):
