@@ -27,6 +27,10 @@ from the first run that reported them; every other number stayed as stored. So w
 breakdown parts' "E_ci" (each scenario, coverage part and horizon step), the judged value's
 "E_ci", and the box answer's interval keys (its comparison with the default suite; one variant:
 no interval).
+r*'s interval and ci_method's "r_star", "r_star_points" and "r_star_resolution" were re-stored
+when the interval came to add points where the resamples' picks fall (the line answer's went from
+[40.73, 60] over 9 points to [36.67, 70] over 17), and programs_run gained "intervals" (those
+points' programs); every other number stayed as stored.
 """
 
 from __future__ import annotations

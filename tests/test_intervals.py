@@ -208,7 +208,9 @@ def test_result_json_s_r_star_interval_holds_r_star_at_evaluated_points():
     assert name == result["param"] and lo <= result["r_star"][name] <= hi
     assert result["interval"][0] <= lo and hi <= result["interval"][1]
     assert result["ci_method"]["r_star_points"] >= len(result["sweep"])
-    assert result["ci_method"]["r_star_resolution"] > 0
+    # made dense where the picks fall: 1 % of the interval apart, or a quarter of r*'s interval
+    wanted = max(0.01 * (result["interval"][1] - result["interval"][0]), 0.25 * (hi - lo))
+    assert 0 < result["ci_method"]["r_star_resolution"] <= wanted
 
 
 def test_sensor_against_sensor_is_paired_over_the_shared_scenes(small):

@@ -27,14 +27,15 @@ SWERLING1 = "configs/sensors/laws/radar_swerling1.toml"
 
 
 def test_the_planned_evaluations_count_the_sweep_twice_the_budget_the_answer_curves_and_dense_grid():
-    assert planned_evaluations(ds.Problem()) == 2 * 6 + 20 + 2  # steps 30, 60, ..., 180
-    assert planned_evaluations(ds.Problem(), sweep_soft=False) == 6 + 20 + 2
+    refine = 2 * 8  # r*'s interval: at most two rounds of eight points
+    assert planned_evaluations(ds.Problem()) == 2 * 6 + 20 + 2 + refine  # steps 30, 60, ..., 180
+    assert planned_evaluations(ds.Problem(), sweep_soft=False) == 6 + 20 + 2 + refine
     problem = ds.Problem(steps=[30, 60, 90], extra_curve_points=5, dense_check=10.0,
                          solve=SolveConfig(max_evaluations=12))
-    assert planned_evaluations(problem) == 2 * 3 + 12 + 2 + 2 * 5 + (150 // 10 + 1)
+    assert planned_evaluations(problem) == 2 * 3 + 12 + 2 + 2 * 5 + (150 // 10 + 1) + refine
     # 70 / 0.7 is 100.00000000000001 in floats: still 100 steps, 101 points
     assert planned_evaluations(ds.Problem(params={"hfov": (30, 100)}, steps=[30, 100], dense_check=0.7)) == \
-        2 * 2 + 20 + 2 + 101
+        2 * 2 + 20 + 2 + 101 + refine
 
 
 def test_the_recorded_config_is_every_keyword_the_sensor_and_predictor_by_name():

@@ -1,5 +1,6 @@
 """How sure the one-parameter answer is: intervals on E from the scene sample and paired
-comparisons of the sweep's steps, read from the evaluations the job made (no program of its own).
+comparisons of the sweep's steps, read from the evaluations the job made (no program of its own),
+and r*'s interval, for which E is evaluated at more points where the resamples' picks fall.
 
 Every E the sweep and the answer report gets a percentile bootstrap interval
 (`diffsense.metrics.bootstrap_ci`: variants resampled within each scenario, B resamples fixed by
@@ -63,40 +64,69 @@ def verdict(a: str, b: str, diff: float, ci: tuple[float, float] | None) -> str:
     return f"{a} and {b} cannot be told apart with these scenes ({diff:+.2f} m [{lo:.2f}, {hi:.2f}])"
 
 
-def _pair(a: str, b: str, e_a: float, e_b: float, s_a: SceneSums, s_b: SceneSums, groups: np.ndarray,
-          seed: int) -> dict[str, Any]:
+def paired_comparison(a: str, b: str, e_a: float, e_b: float, s_a: SceneSums, s_b: SceneSums, groups: np.ndarray,
+                      seed: int, of: str = "sweep") -> dict[str, Any]:
+    """a against b, two evaluations over the same variants (`s_a`, `s_b` their `SceneSums`,
+    `groups` [N] the strata, `e_a`, `e_b` their E [m]): result.json's comparison {"a", "b",
+    "diff_m", "ci", "ci_unpaired", "paired", "of", "verdict"}, the interval of E(a) - E(b)
+    paired scene by scene beside the unpaired one (null where it cannot be estimated)."""
     ci = difference_ci(s_a, s_b, groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
     unpaired = difference_ci(s_a, s_b, groups, paired=False, level=LEVEL, resamples=RESAMPLES, seed=seed)
     diff = e_a - e_b
     return {"a": a, "b": b, "diff_m": diff, "ci": None if ci is None else list(ci),
-            "ci_unpaired": None if unpaired is None else list(unpaired), "paired": True, "of": "sweep",
+            "ci_unpaired": None if unpaired is None else list(unpaired), "paired": True, "of": of,
             "verdict": verdict(a, b, diff, ci)}
 
 
-def r_star_interval(ev: Evaluator, groups: np.ndarray, *, of_reference: bool, seed: int) -> tuple[
-        list[float] | None, float | None, int]:
+# Refining r*'s interval: at most REFINE_ROUNDS rounds of REFINE_POINTS new points spread evenly
+# over the span the resamples' picks could reach, until its points lie no further apart than
+# REFINE_RESOLUTION of the parameter's interval (or a quarter of r*'s own interval, if wider).
+REFINE_ROUNDS = 2
+REFINE_POINTS = 8
+REFINE_RESOLUTION = 0.01
+
+
+def _picked_span(points: np.ndarray, ci: tuple[float, float]) -> tuple[int, int]:
+    """The indices of the evaluated points bounding the span r*'s interval could reach: from the
+    point below the interval's lower end to the one above its upper end (a resample may prefer
+    any r between the last point it picked and the next one out)."""
+    i0 = int(np.searchsorted(points, ci[0], side="left")) - 1
+    i1 = int(np.searchsorted(points, ci[1], side="right"))
+    return max(i0, 0), min(i1, points.size - 1)
+
+
+def r_star_interval(ev: Evaluator, groups: np.ndarray, *, of_reference: bool, seed: int,
+                    interval: tuple[float, float]) -> tuple[list[float] | None, float | None, int]:
     """How far r* would move with other traffic: `argmin_ci` over every point the job evaluated
     the answer's E at (the sweep's steps, the solve's points, the polish, the figures' and the
-    dense check's), each resample re-picking the point of least E. Returns the interval [lo, hi]
-    (None where it cannot be estimated), its resolution (the widest gap between neighbouring
-    evaluated points from the one at or below lo to the one at or above hi) and the points' count."""
-    points = sorted(x[0] for x in (ev.reference_points() if of_reference else ev.hard_points()))
-    sums = [ev.scene_sums(r, of_reference) for r in points]
-    if not points or any(s is None for s in sums):
-        return None, None, len(points)
-    ci = argmin_ci(points, sums, groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
-    if ci is None:
-        return None, None, len(points)
-    p = np.asarray(points)
-    i0 = max(int(np.searchsorted(p, ci[0], side="right")) - 1, 0)
-    i1 = min(int(np.searchsorted(p, ci[1], side="left")), p.size - 1)
-    if i0 == i1:  # the interval is one point: resolved to its neighbours
-        i0, i1 = max(i0 - 1, 0), min(i1 + 1, p.size - 1)
-    return list(ci), (float(np.max(np.diff(p[i0:i1 + 1]))) if i1 > i0 else None), len(points)
+    dense check's), each resample re-picking the point of least E, on points made dense where
+    the picks fall: while the span the interval could reach (`_picked_span`) holds a gap wider
+    than the resolution asked (REFINE_RESOLUTION of `interval`, or a quarter of r*'s interval if
+    that is wider), E is evaluated at REFINE_POINTS more points across it (at most REFINE_ROUNDS
+    times). Returns the interval [lo, hi] (None where it cannot be estimated), its resolution (the
+    widest gap between neighbouring points across that span) and the points' count."""
+    lo, hi = interval
+    rounds = 0
+    while True:
+        points = np.asarray(sorted({x[0] for x in (ev.reference_points() if of_reference else ev.hard_points())}))
+        sums = [ev.scene_sums(r, of_reference) for r in points]
+        if not points.size or any(s is None for s in sums):
+            return None, None, int(points.size)
+        ci = argmin_ci(points, sums, groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
+        if ci is None:
+            return None, None, int(points.size)
+        i0, i1 = _picked_span(points, ci)
+        resolution = float(np.max(np.diff(points[i0:i1 + 1]))) if i1 > i0 else None
+        wanted = max(REFINE_RESOLUTION * (hi - lo), 0.25 * (ci[1] - ci[0]))
+        if resolution is None or resolution <= wanted or rounds == REFINE_ROUNDS:
+            return list(ci), resolution, int(points.size)
+        rounds += 1
+        for r in np.linspace(points[i0], points[i1], REFINE_POINTS + 2)[1:-1]:
+            ev.scene_sums(float(r), of_reference)
 
 
 def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: bool, seed: int, unit: str,
-                   recorded: bool = False) -> dict[str, Any]:
+                   interval: tuple[float, float], recorded: bool = False) -> dict[str, Any]:
     """result.json's interval keys of a one-parameter job: "ci_level", "ci_method", "E_ci" (of
     the answer's E, `e_star` [m]), "sweep_E_ci" (one per sweep step), "r_star_ci" ([lo, hi] on
     r*, `r_star_interval`), "comparisons" and "indistinguishable" (the steps the data cannot tell
@@ -123,12 +153,14 @@ def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: b
     label = {r: f"{r:.5g} {unit}".strip() for r in values}
     label[result.r_star] = label[result.r_star] if result.r_star in steps else f"r* {label[result.r_star]}"
     others = [r for r in steps if r != best] + ([result.r_star] if result.r_star not in steps else [])
-    comparisons = [_pair(label[r], label[best], values[r], values[best], sums[r], sums[best], groups, seed)
+    comparisons = [paired_comparison(label[r], label[best], values[r], values[best], sums[r], sums[best], groups, seed)
                    for r in others]
     same = None if not ok else sorted(
         [best] + [r for r, c in zip(others, comparisons) if r in steps and c["ci"][0] <= 0.0 <= c["ci"][1]])
-    r_ci, resolution, evaluated = r_star_interval(ev, groups, of_reference=of_reference, seed=seed)
-    method |= {"r_star": "argmin over the evaluated points, each resample reweighting them alike",
+    r_ci, resolution, evaluated = r_star_interval(ev, groups, of_reference=of_reference, seed=seed,
+                                                  interval=interval)
+    method |= {"r_star": "argmin over the evaluated points, made dense where the resamples' picks fall, "
+                         "each resample reweighting them alike",
                "r_star_points": evaluated, "r_star_resolution": resolution}
     return {"ci_level": LEVEL, "ci_method": method, "E_ci": ci(result.r_star), "sweep_E_ci": [ci(r) for r in steps],
             "r_star_ci": r_ci, "comparisons": comparisons, "indistinguishable": same,
@@ -174,7 +206,7 @@ def box_intervals(ev: Evaluator, x: Any, default: Any, *, of_reference: bool, se
         method["note"] = "no interval: the objective's reference keeps no per-variant parts"
         return {"ci_level": LEVEL, "ci_method": method, "E_ci": None, "r_star_ci": None, "comparisons": []}
     ci = bootstrap_ci(sums[0], groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
-    against = _pair("r*", "the default suite", e(x), e(default), *sums, groups, seed) | {"of": "default"}
+    against = paired_comparison("r*", "the default suite", e(x), e(default), *sums, groups, seed, of="default")
     return {"ci_level": LEVEL, "ci_method": method, "E_ci": None if ci is None else list(ci), "r_star_ci": None,
             "comparisons": [against]}
 
@@ -210,8 +242,8 @@ def modality_comparisons(results: dict[str, Any]) -> list[dict[str, Any]]:
                 or not np.array_equal(s_a.instants, s_b.instants) or not estimable(g_a, s_a.instants)):
             continue
         ra, rb = results[names[0]], results[b]
-        out.append(_pair(_answer_label(ra), _answer_label(rb), _answer_e(ra), _answer_e(rb), s_a, s_b, g_a, seed)
-                   | {"of": "sensors"})
+        out.append(paired_comparison(_answer_label(ra), _answer_label(rb), _answer_e(ra), _answer_e(rb), s_a, s_b,
+                                     g_a, seed, of="sensors"))
     return out
 
 

@@ -22,7 +22,7 @@ from diffsense.solve import (
 )
 from diffsense.study import _line_report as report
 from diffsense.study._domain import domain_check, domain_note
-from diffsense.study._intervals import breakdown_intervals, line_intervals
+from diffsense.study._intervals import REFINE_POINTS, REFINE_ROUNDS, breakdown_intervals, line_intervals
 from diffsense.study._judge import judged
 from diffsense.study._objective import objective, scenes_line
 from diffsense.study._problem import Problem, problem_config
@@ -32,7 +32,7 @@ Progress = Callable[[str], None]
 
 
 def planned_evaluations(problem: Problem, sweep_soft: bool = True) -> int:
-    """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check).
+    """How many objective evaluations `optimise` plans (sweep, solve budget, figures, dense check, r*'s interval).
     `sweep_soft` False: the sweep reads E_soft off its E_ref (straight-through under a
     probabilistic law, or Brent on E_ref's values), one program per step instead of two."""
     (lo, hi), = problem.params.values()
@@ -40,7 +40,8 @@ def planned_evaluations(problem: Problem, sweep_soft: bool = True) -> int:
     steps = len(solver.steps) if solver.steps is not None else len(default_steps(lo, hi))
     dense = 0 if solver.dense_check is None else int(math.ceil((hi - lo) / solver.dense_check - 1e-9)) + 1
     sweep_programs = (2 if sweep_soft else 1) * steps
-    return sweep_programs + solver.solve.max_evaluations + 2 + solver.extra_curve_points * 2 + dense
+    refine = REFINE_ROUNDS * REFINE_POINTS  # r*'s interval, at most
+    return sweep_programs + solver.solve.max_evaluations + 2 + solver.extra_curve_points * 2 + dense + refine
 
 
 def _evaluator(problem: Problem, E: Objective | None, predictor: Any, say: Progress,
@@ -129,9 +130,11 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
     answered = [(x[0], ev.e_hard(x[0])) for x in ev.hard_points()] if on_hard else \
         [(x[0], ev.e_reference(x[0])) for x in ev.reference_points()]
     answer = near_optimal(answered, lo, hi, result.r_star)
+    before = {"hard": ev.counts["hard"], "reference": ev.reference_count}
     ci = line_intervals(ev, result, ev.e_hard(result.r_star) if on_hard else ev.e_reference(result.r_star),
-                        of_reference=not on_hard, seed=problem.seed, unit=spec.unit,
+                        of_reference=not on_hard, seed=problem.seed, unit=spec.unit, interval=(lo, hi),
                         recorded=problem.traffic.scenes is not None)
+    interval_counts = {"hard": ev.counts["hard"] - before["hard"], "reference": ev.reference_count - before["reference"]}
     near = answer["near_optimal"] | {"indistinguishable": ci.pop("indistinguishable")}
     parts["breakdown"] = breakdown_intervals(ev, result.r_star, parts["breakdown"], of_reference=not on_hard,
                                              seed=problem.seed, recorded=problem.traffic.scenes is not None)
@@ -139,7 +142,7 @@ def optimise_line(problem: Problem, E: Objective | None, predictor: Any, figures
         sensor=problem.sensor_kind, params=dict(problem.params), units={name: spec.unit},
         r_star={name: float(result.r_star)}, E_hard_star=ev.e_hard(result.r_star),
         E_soft_star=float(result.E_soft_star), solve=result,
-        programs_run={"solve": solve_counts, "figures": figure_counts},
+        programs_run={"solve": solve_counts, "figures": figure_counts, "intervals": interval_counts},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
                 "programs_lowered": clock.lowered},
         scenarios=tuple(E.scenario_names),

@@ -36,10 +36,13 @@ result.json schema (every key always present; non-finite numbers are written as 
     "r_star_ci"     {name: [lo, hi]} | null   how far r* would move with other traffic: the
                              percentile interval of r* re-picked on each resample as the point of
                              least E among the points the run evaluated E at (`diffsense.metrics.
-                             argmin_ci`), so resolved to them: "ci_method" holds "r_star_points"
-                             (how many) and "r_star_resolution" (the widest gap between neighbouring
-                             points across the interval, parameter units); null as "E_ci" is,
-                             and for a many-parameter answer
+                             argmin_ci`), with points added where the picks fall until they lie
+                             1 % of the interval (or a quarter of r*'s interval) apart there
+                             (two rounds of eight points at most), so
+                             resolved to them: "ci_method" holds "r_star_points" (how many) and
+                             "r_star_resolution" (the widest gap between neighbouring points from
+                             the one below the interval to the one above it, parameter units);
+                             null as "E_ci" is, and for a many-parameter answer
     "comparisons"   [{"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "of", "verdict"}, ...]
                              each sweep step (and r*, where it is no step) against the best step
                              ("of": "sweep"), then, with `--sensor both`, the first sensor's
@@ -52,10 +55,12 @@ result.json schema (every key always present; non-finite numbers are written as 
     "sweep"         [{"r": number, "E_hard": m, "E_soft": m, "E_ci": [lo, hi] | null}, ...]
                              the stepped sweep, each step's E with its interval
     "evaluations"   {"objective": int, "gradient": int}  of the continuous solve (sweep excluded)
-    "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...}}  compiled-program
-                             runs (memoised points are not run again): the solve's, and those
+    "programs_run"  {"solve": {"soft": int, "hard": int}, "figures": {...},
+                     "intervals": {"hard": int, "reference": int}}  compiled-program
+                             runs (memoised points are not run again): the solve's, those
                              after it for the figures and the report (a many-parameter answer's
-                             default-suite comparison)
+                             default-suite comparison), and the points evaluated to make r*'s
+                             interval dense (a one-parameter answer)
     "wall_s"        {"compile": s, "run": s, "programs_compiled": n, "programs_lowered": m}
                              (n: programs XLA compiled rather than loaded from the persistent
                              compilation cache; m: programs JAX traced and lowered, compiled or
