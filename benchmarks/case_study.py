@@ -10,6 +10,10 @@ the 3 s window, and the missed share), the coverage shares, and per scenario the
 horizon step of the ground-truth-input and the sensor-input predictions against the true future
 (the paper's Figs. 6 and 7). Everything comes from `diffsense.solve.Evaluator.breakdown` and
 `Evaluator.hard`; one compiled problem per row of the run list, one hard evaluation per step.
+Intervals from the scene sample, as the main job's (`diffsense.study`): each step's pooled
+"E_ci" and its breakdown parts' (by scenario, coverage, horizon step); each run's "comparisons",
+every step against its best step, paired; and the file's "comparisons", radar against camera at
+each step (each profile with its own fill), paired over the scenes both saw (same seed).
 `--json -` prints the JSON. Without the NGSIM checkpoint, `ngsim` is skipped with a note.
 """
 
@@ -28,7 +32,9 @@ import numpy as np
 
 import diffsense as ds
 from diffsense import cli, solve
+from diffsense.metrics import bootstrap_ci, estimable
 from diffsense.predictors import load_predictor
+from diffsense.study import breakdown_intervals, paired_comparison
 
 ROOT = Path(__file__).resolve().parents[1]
 NGSIM_DEFAULT = ROOT.parent / "shared" / "weights" / "ngsim" / "cslstm_no_m.tar"
@@ -44,20 +50,51 @@ def runs(profiles):
     return out
 
 
-def one_run(predictor, profile, sensor, fill, args) -> dict:
+def one_run(predictor, profile, sensor, fill, args) -> tuple[dict, dict]:
+    """One problem's steps (the JSON's run), and each step's `SceneSums` with the strata (for the
+    radar-against-camera comparisons)."""
     problem = ds.Problem(sensor=sensor, params={"hfov_deg": (min(args.steps), max(args.steps))},
                          scenarios=args.scenarios, variants=args.variants, profile=profile, fill=fill, seed=0)
     t0 = time.perf_counter()
     ev = solve.Evaluator(ds.objective(problem, predictor=predictor))
+    strata = np.asarray(ev.objective.data.scenario)
+    sums = {r: ev.scene_sums(r, of_reference=False) for r in args.steps}  # E_hard: each detection at its median
     steps = []
     for r in args.steps:
-        b = ev.breakdown(r, of_reference=False)  # E_hard with each detection at its median
-        steps.append({"r": r, "E_hard": b["E_hard"], "tracked": b["tracked"], "coverage": b["coverage"],
+        b = breakdown_intervals(ev, r, ev.breakdown(r, of_reference=False), of_reference=False, seed=problem.seed)
+        ci = bootstrap_ci(sums[r], strata, seed=problem.seed)
+        steps.append({"r": r, "E_hard": b["E_hard"], "E_ci": None if ci is None else list(ci),
+                      "tracked": b["tracked"], "coverage": b["coverage"],
                       "by_scenario": b["by_scenario"], "by_horizon": b["by_horizon"],
                       "rmse_sensor": np.asarray(ev.hard(r).rmse_sensor).tolist()})
     gt = np.asarray(ev.hard(args.steps[0]).rmse_gt).tolist()  # [S, 25]; the same at every step
-    return {"profile": profile, "sensor": sensor, "fill": fill, "steps": steps, "rmse_gt": gt,
-            "scenarios": list(ev.objective.scenario_names), "wall_s": time.perf_counter() - t0}
+    e = {s["r"]: s["E_hard"] for s in steps}
+    best = min(args.steps, key=e.__getitem__)
+    comparisons = [paired_comparison(f"{r:g} deg", f"{best:g} deg", e[r], e[best], sums[r], sums[best], strata,
+                                     problem.seed) for r in args.steps if r != best]
+    run = {"profile": profile, "sensor": sensor, "fill": fill, "steps": steps, "rmse_gt": gt,
+           "comparisons": comparisons, "scenarios": list(ev.objective.scenario_names),
+           "wall_s": time.perf_counter() - t0}
+    return run, {"sums": sums, "strata": strata, "seed": problem.seed}
+
+
+def sensor_comparisons(runs: list[dict], kept: dict, steps: list[float]) -> list[dict]:
+    """Radar against camera at each step, each profile with its own fill, paired over the scenes
+    both saw: {"weights", "profile", "r", and `paired_comparison`'s keys ("of": "sensors")}."""
+    out = []
+    by_key = {(r["weights"], r["profile"], r["sensor"], r["fill"]): i for i, r in enumerate(runs)}
+    for (w, profile, sensor, fill), i in by_key.items():
+        j = by_key.get((w, profile, "camera", PROFILE_FILL[profile]))
+        if sensor != "radar" or fill != PROFILE_FILL[profile] or j is None:
+            continue
+        a, b = kept[i], kept[j]
+        if not (np.array_equal(a["strata"], b["strata"]) and estimable(a["strata"])):
+            continue
+        for k, r in enumerate(steps):
+            out.append({"weights": w, "profile": profile, "r": r} | paired_comparison(
+                f"radar at {r:g} deg", f"camera at {r:g} deg", runs[i]["steps"][k]["E_hard"],
+                runs[j]["steps"][k]["E_hard"], a["sums"][r], b["sums"][r], a["strata"], a["seed"], of="sensors"))
+    return out
 
 
 def main(argv=None) -> int:
@@ -85,13 +122,17 @@ def main(argv=None) -> int:
            "variants": args.variants, "steps_deg": args.steps, "notes": notes,
            "validation_rmse_m": {w: pr.validation_rmse_m for w, pr in predictors.items()}, "runs": []}
     t0 = time.perf_counter()
+    kept = []
     for w, predictor in predictors.items():
         for profile, sensor, fill in runs(args.profiles.split(",")):
-            run = one_run(predictor, profile, sensor, fill, args) | {"weights": w}
+            run, sums = one_run(predictor, profile, sensor, fill, args)
+            run["weights"] = w
             out["runs"].append(run)
+            kept.append(sums)
             e = " ".join(f"{s['E_hard']:.3f}" for s in run["steps"])
             print(f"{w:>7} {profile:>8} {sensor:>6} fill={fill:<6} {run['wall_s']:6.1f} s  E_hard: {e}",
                   file=sys.stderr, flush=True)
+    out["comparisons"] = sensor_comparisons(out["runs"], kept, args.steps)
     out["wall_s"] = time.perf_counter() - t0
     out["machine"]["load_after"] = os.getloadavg()
     text = json.dumps(out, indent=1)

@@ -105,3 +105,53 @@ def test_a_missing_or_malformed_file_is_one_line(tmp_path, content, capsys):
         run(lambda: command.main([str(path)]))
     err = capsys.readouterr().err
     assert e.value.code == 2 and err.startswith(f"error: {path}") and err.count("\n") == 1
+
+
+def _comparison(a: str, b: str, diff: float, ci: list[float] | None, **extra) -> dict:
+    return {"a": a, "b": b, "diff_m": diff, "ci": ci, "ci_unpaired": ci, "paired": True, "verdict": "", **extra}
+
+
+def _with_intervals() -> dict:
+    """DATA with the intervals a current results file holds: each step's E_ci, each run's
+    comparisons against its best step, and the file's radar-against-camera comparisons."""
+    data = json.loads(json.dumps(DATA))
+    for run in data["runs"]:
+        e = [s["E_hard"] for s in run["steps"]]
+        best = STEPS[e.index(min(e))]
+        for s in run["steps"]:
+            s["E_ci"] = [s["E_hard"] - 0.25, s["E_hard"] + 0.25]
+        run["comparisons"] = [_comparison(f"{r:g} deg", f"{best:g} deg", v - min(e),
+                                          [v - min(e) - 0.1, v - min(e) + 0.1]) for r, v in zip(STEPS, e) if r != best]
+    radar = {p: next(r for r in data["runs"] if (r["profile"], r["sensor"], r["fill"]) == (p, "radar", f))
+             for p, f in (("physical", "hold"), ("paper", "zero"))}
+    camera = {p: next(r for r in data["runs"] if (r["profile"], r["sensor"]) == (p, "camera")) for p in radar}
+    data["comparisons"] = [
+        _comparison(f"radar at {r:g} deg", f"camera at {r:g} deg", d, [d - 0.6, d + 0.6], weights="ngsim", profile=p,
+                    r=r, of="sensors")
+        for p in radar for k, r in enumerate(STEPS)
+        for d in [radar[p]["steps"][k]["E_hard"] - camera[p]["steps"][k]["E_hard"]]]
+    return data
+
+
+def test_intervals_in_the_file_reach_the_tables_and_the_statements(tmp_path, capsys):
+    data = _with_intervals()
+    runs = case_study.index_runs([data])
+    rows = _cells(case_study.pooled(runs, ["ngsim"], STEPS))
+    assert rows[1] == ["", "", "", "90% CI", "[1.75, 2.25]", "[1.25, 1.75]", "[1.25, 1.75]", ""]  # radar, physical (1.755: 1.75 in binary)
+    # every step against the run's best (physical radar: best 60 deg), paired
+    assert _cells(case_study.against_best(runs, STEPS))[0] == ["ngsim", "physical", "radar", "+0.50 [0.40, 0.60]",
+                                                               "best", "+0.00 [-0.10, 0.10]"]  # +0.005
+    # radar - camera: physical 2.0 - 3.0, 1.5 - 2.75, 1.505 - 2.5; paper 4 - 1, 3 - 3, 2 - 3.5
+    assert _cells(case_study.radar_against_camera(data["comparisons"], STEPS)) == [
+        ["ngsim", "physical", "-1.00 [-1.60, -0.40]", "-1.25 [-1.85, -0.65]", "-1.00 [-1.60, -0.40]"],
+        ["ngsim", "paper", "+3.00 [2.40, 3.60]", "+0.00 [-0.60, 0.60]", "-1.50 [-2.10, -0.90]"]]
+    physical, paper = case_study.statements(runs, ["ngsim"], STEPS, data["comparisons"]).splitlines()
+    # (1) below camera at 3 steps, all 3 clear of the interval; (2) worse than 60 deg by more than the
+    # interval at 1 of the 2 other steps (30 deg; 90 deg's +0.005 is not)
+    assert "at 3 of 3 steps (3 by more than the paired 90 % interval)" in physical
+    assert "at 1 of 2 other steps" in physical
+    assert "at 1 of 3 steps (1 by more than the paired 90 % interval)" in paper and "at 2 of 2 other steps" in paper
+    results = tmp_path / "r.json"
+    results.write_text(json.dumps(data))
+    assert case_study.print_case_study([str(results)]) == 0
+    assert len([line for line in capsys.readouterr().out.splitlines() if line.startswith("### ")]) == 7

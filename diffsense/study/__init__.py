@@ -16,6 +16,7 @@ from diffsense.study._intervals import (
     box_intervals,
     breakdown_intervals,
     modality_comparisons,
+    paired_comparison,
     with_modality_comparisons,
 )
 from diffsense.study._judge import judge_seed, judging_objective
@@ -59,6 +60,6 @@ __all__ = [
     "PredictionSpec", "Problem", "QuestionSpec", "Result", "SensingSpec", "Settings", "SolverSpec", "TrafficSpec",
     "answer_ci", "box_intervals", "breakdown_intervals", "check_lambdas", "check_theta", "checked", "domain_check", "domain_note", "judge_seed", "judging_objective",
     "load_settings", "load_suite",
-    "memory_estimate_bytes", "modality_comparisons", "named_members", "objective", "odd_shift", "optimise", "pareto", "planned_evaluations",
+    "memory_estimate_bytes", "modality_comparisons", "named_members", "paired_comparison", "objective", "odd_shift", "optimise", "pareto", "planned_evaluations",
     "problem_config", "problem_fields", "recorded_cut", "seed_keys", "sensitivity", "shared_fields", "traffic_scenes", "with_modality_comparisons",
 ]
