@@ -30,7 +30,8 @@ no interval).
 r*'s interval and ci_method's "r_star", "r_star_points" and "r_star_resolution" were re-stored
 when the interval came to add points where the resamples' picks fall (the line answer's went from
 [40.73, 60] over 9 points to [36.67, 70] over 17), and programs_run gained "intervals" (those
-points' programs); every other number stayed as stored.
+points' programs); every other number stayed as stored. ci_method's "r_star_caveat" (r*'s interval
+is a lower bound where r* is chosen on E_hard) was added from the first run that reported it.
 """
 
 from __future__ import annotations

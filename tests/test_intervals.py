@@ -211,6 +211,8 @@ def test_result_json_s_r_star_interval_holds_r_star_at_evaluated_points():
     # made dense where the picks fall: 1 % of the interval apart, or a quarter of r*'s interval
     wanted = max(0.01 * (result["interval"][1] - result["interval"][0]), 0.25 * (hi - lo))
     assert 0 < result["ci_method"]["r_star_resolution"] <= wanted
+    # chosen on E_hard (the threshold law): the interval says it is a lower bound
+    assert result["reference"]["answer_on"] == "E_hard" and result["ci_method"]["r_star_caveat"]
 
 
 def test_sensor_against_sensor_is_paired_over_the_shared_scenes(small):

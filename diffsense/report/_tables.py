@@ -201,7 +201,8 @@ def _r_star_lines(result: Mapping[str, Any]) -> list[str]:
         gap = method.get("r_star_resolution")
         out.append(f"r* with other traffic: {name} in [{lo:.4g}, {hi:.4g}] {unit} ({result['ci_level']:.0%}, "
                    f"re-picked among the {method.get('r_star_points')} points evaluated"
-                   + (f", {gap:.3g} {unit} apart at most there)" if gap is not None else ")"))
+                   + (f", {gap:.3g} {unit} apart at most there)" if gap is not None else ")")
+                   + ("; a lower bound, r* chosen on E_hard" if method.get("r_star_caveat") else ""))
     return out
 
 

@@ -25,7 +25,9 @@ result.json schema (every key always present; non-finite numbers are written as 
                              sample (null as "E_ci" is); null when the run was asked not to judge
     "ci_level"      number   the level of every interval below (0.9)
     "ci_method"     {"method", "resamples": B, "strata": "scenario" | "none", "seed", "note": string | null,
-                             "r_star", "r_star_points", "r_star_resolution" (with intervals)}
+                             "r_star", "r_star_points", "r_star_resolution", "r_star_caveat"
+                             (with intervals; the caveat a string where r* is chosen on E_hard,
+                             whose interval covers less than its level, else null)}
                              how the intervals are made (`diffsense.metrics.bootstrap_ci`: a
                              stratified expanded percentile bootstrap over scene variants, reweighting
                              per-variant sums the run computed; detection draws' error included
