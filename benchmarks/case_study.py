@@ -32,9 +32,9 @@ import numpy as np
 
 import diffsense as ds
 from diffsense import cli, solve
-from diffsense.metrics import bootstrap_ci, estimable
+from diffsense.metrics import estimable
 from diffsense.predictors import load_predictor
-from diffsense.study import breakdown_intervals, paired_comparison
+from diffsense.study import answer_ci, breakdown_intervals, paired_comparison
 
 ROOT = Path(__file__).resolve().parents[1]
 NGSIM_DEFAULT = ROOT.parent / "shared" / "weights" / "ngsim" / "cslstm_no_m.tar"
@@ -62,8 +62,7 @@ def one_run(predictor, profile, sensor, fill, args) -> tuple[dict, dict]:
     steps = []
     for r in args.steps:
         b = breakdown_intervals(ev, r, ev.breakdown(r, of_reference=False), of_reference=False, seed=problem.seed)
-        ci = bootstrap_ci(sums[r], strata, seed=problem.seed)
-        steps.append({"r": r, "E_hard": b["E_hard"], "E_ci": None if ci is None else list(ci),
+        steps.append({"r": r, "E_hard": b["E_hard"], "E_ci": answer_ci(ev, r, seed=problem.seed, of_reference=False),
                       "tracked": b["tracked"], "coverage": b["coverage"],
                       "by_scenario": b["by_scenario"], "by_horizon": b["by_horizon"],
                       "rmse_sensor": np.asarray(ev.hard(r).rmse_sensor).tolist()})

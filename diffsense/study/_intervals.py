@@ -187,10 +187,11 @@ def breakdown_intervals(ev: Evaluator, r: float, breakdown: dict[str, Any], *, o
                                                     seed=seed))
 
 
-def answer_ci(ev: Evaluator, r: Any, *, seed: int, recorded: bool = False) -> list[float] | None:
-    """The interval [lo, hi] [m] on E_ref at r (E_hard under a deterministic law) from the scene
-    sample of `ev`'s objective; None where it cannot be estimated."""
-    sums = ev.scene_sums(r)
+def answer_ci(ev: Evaluator, r: Any, *, seed: int, recorded: bool = False,
+              of_reference: bool = True) -> list[float] | None:
+    """The interval [lo, hi] [m] on E_ref at r (E_hard under a deterministic law, or where not
+    `of_reference`) from the scene sample of `ev`'s objective; None where it cannot be estimated."""
+    sums = ev.scene_sums(r, of_reference)
     if sums is None:
         return None
     out = bootstrap_ci(sums, strata(ev, recorded)[0], level=LEVEL, resamples=RESAMPLES, seed=seed)
