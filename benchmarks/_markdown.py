@@ -3,7 +3,13 @@
 
 from __future__ import annotations
 
+import json
+import os
+import platform
+from collections.abc import Callable, Iterable
 from pathlib import Path
+
+import jax
 
 
 def replace_block(markdown: Path, name: str, body: str) -> None:
@@ -14,3 +20,17 @@ def replace_block(markdown: Path, name: str, body: str) -> None:
         raise SystemExit(f"error: {markdown} has no {start} ... {end} block")
     head, rest = text.split(start, 1)
     markdown.write_text(f"{head}{start}\n{body}\n{end}{rest.split(end, 1)[1]}")
+
+
+def measured_rows(path: Path, render_only: bool, rows: Iterable[Callable[[], dict]]) -> dict:
+    """A results JSON {"rows", "meta"}: read from `path` where `render_only`, otherwise measured
+    row by row (`rows`, each a function returning one), the file rewritten as each row ends so
+    that an interrupted run keeps the rows it finished."""
+    if render_only:
+        return json.loads(path.read_text())
+    res = {"rows": [], "meta": {"machine": platform.platform(), "cpus": os.cpu_count(), "jax": jax.__version__}}
+    for row in rows:
+        res["rows"].append(row())
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(res, indent=1) + "\n")
+    return res

@@ -22,9 +22,7 @@ rendered from the JSON.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import subprocess
 import time
 from pathlib import Path
@@ -36,7 +34,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import diffsense as ds  # noqa: E402
-from _markdown import replace_block  # noqa: E402
+from _markdown import measured_rows, replace_block  # noqa: E402
 from diffsense.metrics import LEVEL, RESAMPLES, EstimatorConfig, argmin_ci  # noqa: E402
 from diffsense.solve import Evaluator  # noqa: E402
 
@@ -114,17 +112,13 @@ def main(argv=None) -> None:
     p.add_argument("--render", type=Path, default=None)
     p.add_argument("--render-only", action="store_true", help="render the stored JSON, run nothing")
     args = p.parse_args(argv)
-    if args.render_only:
-        res = json.loads(args.json.read_text())
-    else:
-        res = {"rows": [], "meta": {"machine": platform.platform(), "cpus": os.cpu_count(), "jax": jax.__version__}}
-        for answer in args.answers.split(","):
-            if answer not in GRIDS:
-                raise SystemExit(f"error: --answers takes E_ref and E_hard, got {answer!r}")
-            for v in (int(x) for x in args.variants.split(",")):
-                res["rows"].append(run(answer, v, args.seeds))
-                args.json.parent.mkdir(parents=True, exist_ok=True)
-                args.json.write_text(json.dumps(res, indent=1) + "\n")
+    answers = args.answers.split(",")
+    for answer in answers:
+        if answer not in GRIDS:
+            raise SystemExit(f"error: --answers takes E_ref and E_hard, got {answer!r}")
+    variants = [int(x) for x in args.variants.split(",")]
+    res = measured_rows(args.json, args.render_only,
+                        (lambda a=a, v=v: run(a, v, args.seeds) for a in answers for v in variants))
     print(table(res))
     if args.render:
         replace_block(args.render, "r-star-coverage", table(res))

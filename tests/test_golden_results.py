@@ -32,6 +32,9 @@ when the interval came to add points where the resamples' picks fall (the line a
 [40.73, 60] over 9 points to [36.67, 70] over 17), and programs_run gained "intervals" (those
 points' programs); every other number stayed as stored. ci_method's "r_star_caveat" (r*'s interval
 is a lower bound where r* is chosen on E_hard) was added from the first run that reported it.
+When a many-parameter answer's r* came to have an interval along each parameter's axis, the box
+file's programs_run gained "intervals" (zero: one variant per scenario gives no interval) and its
+ci_method's "r_star" came to read "not estimated"; every other number stayed as stored.
 """
 
 from __future__ import annotations

@@ -33,5 +33,7 @@ def test_the_page_shows_result_json_s_answer_and_reaches_nothing_outside(name):
         assert float(values[f"r_star.{n}"]) == v
     if content["E_ci"]:
         assert [float(values["E_ci.lo"]), float(values["E_ci.hi"])] == content["E_ci"]
+    for n, (lo, hi) in (content["r_star_ci"] or {}).items():
+        assert [float(values[f"r_star_ci.{n}.lo"]), float(values[f"r_star_ci.{n}.hi"])] == [lo, hi]
     for c in content["comparisons"]:
         assert c["verdict"] in page or __import__("html").escape(c["verdict"]) in page

@@ -182,21 +182,28 @@ def difference_ci(a: SceneSums, b: SceneSums, strata: Int[np.ndarray, " N"], *, 
 
 
 def argmin_ci(points: Float[np.ndarray, " P"], sums: list[SceneSums], strata: Int[np.ndarray, " N"], *,
-              level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0) -> tuple[float, float] | None:
+              level: float = LEVEL, resamples: int = RESAMPLES, seed: int = 0,
+              offset_m: Float[np.ndarray, " P"] | None = None) -> tuple[float, float] | None:
     """The bootstrap interval [lo, hi] on the minimiser r* of E over evaluated `points` [P]
     (`sums` [P] their `SceneSums`, over the same variants): each resample (the resamples of
     `bootstrap_ci`, same seed) reweights every point alike and picks the point of least E, a
     re-solve over the points on that resample's scenes; the interval is the picks' quantiles at
     `bootstrap_ci`'s expanded tails. Resolved to the points: r* between two of them is read as
-    one of the two. None where it cannot be estimated."""
+    one of the two. `offset_m` [P], where given, is added to each point's E before the pick (a
+    suite's lambda x cost, so that the pick is J's: the scenes do not move the cost). None where
+    it cannot be estimated."""
     if len(points) != len(sums) or not sums:
         raise ValueError(f"{len(points)} points and {len(sums)} sums: one SceneSums per point")
+    if offset_m is not None and np.shape(offset_m) != (len(points),):
+        raise ValueError(f"offset_m has shape {np.shape(offset_m)}, want ({len(points)},): one per point")
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must lie in (0, 1), got {level}")
     counts = bootstrap_counts(strata, weight=_weight(sums[0]), resamples=resamples, seed=seed)
     if counts is None:
         return None
-    e = np.stack([s.e2(counts) for s in sums])  # [P, B]
+    e = np.stack([s.e2(counts) for s in sums])  # [P, B]; E^2 picks as E does, where nothing is added
+    if offset_m is not None:
+        e = np.sqrt(np.maximum(e, 0.0)) + np.asarray(offset_m, np.float64)[:, None]
     picks = np.asarray(points, np.float64)[np.argmin(e, axis=0)]
     tail = expanded_tail(strata, _weight(sums[0]), level)
     # the quantiles read outward to evaluated points: no r* between two points is claimed

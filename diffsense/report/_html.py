@@ -71,7 +71,9 @@ def answer_value(content: Mapping[str, Any]) -> float | None:
 def _answer(content: Mapping[str, Any]) -> str:
     units, level = content.get("units") or {}, content.get("ci_level")
     e_name = "E_ref(r*)" if _on_ref(content) else "E_hard(r*)"
-    rows = [[f"r* {_e(n)}", f"{_num(v, f'r_star.{n}', '.6g')} {_e(units.get(n, ''))}"]
+    r_ci = content.get("r_star_ci") or {}
+    rows = [[f"r* {_e(n)}", f"{_num(v, f'r_star.{n}', '.6g')} {_e(units.get(n, ''))}"
+             + (f"; with other traffic {_ci(r_ci[n], f'r_star_ci.{n}', '.4g')}" if r_ci.get(n) else "")]
             for n, v in (content.get("r_star") or {}).items()]
     rows.append([_e(e_name), f"{_num(answer_value(content), 'E')} m"])
     if "E_ci" in content:

@@ -206,17 +206,25 @@ def _r_star_lines(result: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def _r_ci(ci: Sequence[float] | None) -> str:
+    """r*'s interval of one parameter as a cell (its own units); "-" where there is none."""
+    return "-" if ci is None else f"[{ci[0]:.4g}, {ci[1]:.4g}]"
+
+
 def _on_ref(result: Mapping[str, Any]) -> bool:
     return (result.get("reference") or {}).get("answer_on") == "E_ref"
 
 
 def box_table(result: Mapping[str, Any]) -> str:
     """The printed summary of a many-parameter solve: r*, what still matters (dJ/dr) and bounds."""
-    box = result["box"]
-    rows = [[name, value, result["units"][name], box["gradient"][name], box["on_bound"][name] or "interior"]
+    box, r_ci = result["box"], result.get("r_star_ci") or {}
+    rows = [[name, value] + ([_r_ci(r_ci.get(name))] if r_ci else []) + [
+             result["units"][name], box["gradient"][name], box["on_bound"][name] or "interior"]
             for name, value in result["r_star"].items()]
+    head = ["parameter", "r*"] + ([f"r* with other traffic ({result['ci_level']:.0%})"] if r_ci else []) + [
+        "unit", "dJ/dr at r*", ""]
     lines = [f"{result['sensor']}: {len(rows)} parameters, J = E + {box['cost_weight']:g} x cost",
-             format_table(["parameter", "r*", "unit", "dJ/dr at r*", ""], rows),
+             format_table(head, rows),
              f"E_hard(r*) {_cell(result['E_hard_star'])} m, E_soft {_cell(result['E_soft_star'])} m, "
              f"cost {_cell(box['cost'])}, J {_cell(box['J_star'])} ({box['source']}); "
              f"{box['counts'].get('soft', 0)} value-and-gradient + {box['counts'].get('hard', 0)} "
@@ -230,6 +238,10 @@ def box_table(result: Mapping[str, Any]) -> str:
         lines.append("cost by member: " + ", ".join(f"{n} {_cell(c)}" for n, c in box["cost_by_member"].items()))
     if result.get("E_ci"):
         lines.append(f"{result['ci_level']:.0%} interval on the answer's E from the scene sample: {_ci(result['E_ci'])} m")
+    if r_ci:
+        lines.append("r* with other traffic: each parameter re-picked along its axis through r*, the others held "
+                     "there (conditional: parameters that trade against each other move further together)"
+                     + ("; a lower bound, r* chosen on E_hard" if not _on_ref(result) else ""))
     lines += [c['verdict'] for c in result.get("comparisons") or []
               if c.get("of") == "default"]
     lines += judged_lines(result)

@@ -19,6 +19,7 @@ import numpy as np
 
 from diffsense.metrics import (
     Objective,
+    estimable,
     is_deterministic,
     load_costs,
     make_cost,
@@ -27,11 +28,12 @@ from diffsense.metrics import (
 from diffsense.runtime import CompileClock, InputError
 from diffsense.solve import BoxFunctions, BoxResult, Evaluator, box_solve, pareto_sweep
 from diffsense.study._domain import domain_check, domain_note
-from diffsense.study._intervals import box_intervals, breakdown_intervals
+from diffsense.study._intervals import box_intervals, breakdown_intervals, strata
 from diffsense.study._judge import judged
 from diffsense.study._line_report import reference_summary
 from diffsense.study._objective import objective, scenes_line
 from diffsense.study._problem import Problem, problem_config
+from diffsense.study._r_star import AXIS_POINTS, REFINE_POINTS, REFINE_ROUNDS
 from diffsense.study._result import Result
 
 # The cost weights a front is traced at by default [m per currency unit]: from E alone (0) to
@@ -43,7 +45,7 @@ Say = Callable[[str], None]
 OnEvaluation = Callable[[dict], None] | None
 
 
-def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, solves: int = 1):
+def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, solves: int = 1, intervals: bool = True):
     """The Evaluator, the box functions (cost model included) and the clipped default start."""
     ev = Evaluator(E)
     # Under a probabilistic detection law answers are judged on E_ref, the expectation the
@@ -54,7 +56,8 @@ def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, solv
     screen = None if _on_hard(problem, E) else min(problem.solver.box.screen_draws, E.estimator.reference_draws)
     fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.question.costs), E.sensor),
                                       e_answer=e_answer, screen_draws=screen)
-    planned = _planned(problem, screen is not None, solves)
+    axes = intervals and estimable(*strata(ev, problem.traffic.scenes is not None))  # r*'s interval is made
+    planned = _planned(problem, screen is not None, solves, axes)
     if on_evaluation is not None:
         def listen(event) -> None:  # what a progress display shows: E, the cost there, the count
             done = sum(fns.counts.values())
@@ -81,13 +84,15 @@ def _member_costs(problem: Problem, E: Objective, r: dict[str, float]) -> dict[s
     return member_costs(load_costs(problem.question.costs), E.sensor, r)
 
 
-def _planned(problem: Problem, screening: bool, solves: int = 1) -> int:
-    """The evaluations a progress display expects: the soft budget, and the hard sample or the
-    screen with its best points."""
+def _planned(problem: Problem, screening: bool, solves: int = 1, intervals: bool = True) -> int:
+    """The evaluations a progress display expects: the soft budget, the hard sample or the
+    screen with its best points, and r*'s interval along each axis."""
     box, d = problem.solver.box, len(problem.params)
+    # r*'s interval (where the scenes give one): each axis's points and its refinement, at most
+    axes = d * (AXIS_POINTS + REFINE_ROUNDS * REFINE_POINTS) if intervals else 0
     if screening and box.screen_points >= 0:
-        return solves * box.max_soft + (box.screen_points or 8 * d + 8) + box.starts
-    return solves * box.max_soft + (box.samples or 2 * d + 2)
+        return solves * box.max_soft + (box.screen_points or 8 * d + 8) + box.starts + axes
+    return solves * box.max_soft + (box.samples or 2 * d + 2) + axes
 
 
 def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say, on_evaluation: OnEvaluation,
@@ -109,8 +114,12 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         star = breakdown_intervals(ev, x, ev.breakdown(x, of_reference=on_ref), of_reference=on_ref,
                                    seed=problem.seed, recorded=recorded)
         parts = {"breakdown": star, "tracked": star["tracked"]}
-        ci = box_intervals(ev, x, start, of_reference=on_ref, seed=problem.seed, recorded=recorded)
+        ev.scene_sums(start, on_ref)  # the default suite the answer is compared with: the report's
         after = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
+        weight, before = problem.question.cost_weight, {"hard": ev.counts["hard"], "reference": ev.reference_count}
+        ci = box_intervals(ev, x, start, of_reference=on_ref, seed=problem.seed, recorded=recorded,
+                           bounds=[problem.params[n] for n in E.names], offset_at=lambda y: weight * fns.cost(y)[0])
+        interval_counts = {"hard": ev.counts["hard"] - before["hard"], "reference": ev.reference_count - before["reference"]}
         fresh = None
         if judge:
             say(f"{problem.sensor_kind}: judging r* on fresh scenes and draws")
@@ -122,7 +131,7 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         sensor=problem.sensor_kind, params=dict(problem.params), units=_units(problem),
         r_star=dict(box.x_star), E_hard_star=ev.e_hard(x), E_soft_star=float(box.E_soft), solve=None, box=box,
         reference=reference_summary(ev, problem, x, _on_hard(problem, E)),
-        programs_run={"solve": solve_counts, "figures": after},
+        programs_run={"solve": solve_counts, "figures": after, "intervals": interval_counts},
         wall_s={"compile": clock.compile_s, "run": clock.run_s, "programs_compiled": clock.compiled,
                 "programs_lowered": clock.lowered},
         scenarios=tuple(E.scenario_names), config=problem_config(problem), domain=domain, box_notes=notes,
@@ -201,7 +210,7 @@ def pareto(problem: Problem, lambdas: Sequence[float] = DEFAULT_LAMBDAS, *, E: O
     t0 = time.perf_counter()
     say(scenes_line(problem))
     E = objective(problem, predictor=predictor, progress=say) if E is None else E
-    ev, fns, start = _functions(problem, E, on_evaluation, len(lambdas))
+    ev, fns, start = _functions(problem, E, on_evaluation, len(lambdas), intervals=False)
     config = dataclasses.replace(problem.solver.box, seed=problem.seed)
     judged_on = "E_hard" if _on_hard(problem, E) else "E_ref"
 

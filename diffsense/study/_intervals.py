@@ -14,6 +14,7 @@ scenario of one variant: they are resampled as one sample instead.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,6 @@ from diffsense.metrics import (
     LEVEL,
     RESAMPLES,
     SceneSums,
-    argmin_ci,
     bootstrap_ci,
     difference_ci,
     estimable,
@@ -31,6 +31,7 @@ from diffsense.metrics import (
 )
 from diffsense.runtime import to_host
 from diffsense.solve import Evaluator
+from diffsense.study._r_star import CONDITIONAL_CAVEAT, box_r_star_interval, r_star_interval
 
 METHOD = "stratified expanded percentile bootstrap over scene variants"
 # Measured by benchmarks/bench_r_star_coverage.py (docs/uncertainty.md): on E_hard the interval
@@ -81,53 +82,6 @@ def paired_comparison(a: str, b: str, e_a: float, e_b: float, s_a: SceneSums, s_
     return {"a": a, "b": b, "diff_m": diff, "ci": None if ci is None else list(ci),
             "ci_unpaired": None if unpaired is None else list(unpaired), "paired": True, "of": of,
             "verdict": verdict(a, b, diff, ci)}
-
-
-# Refining r*'s interval: at most REFINE_ROUNDS rounds of REFINE_POINTS new points spread evenly
-# over the span the resamples' picks could reach, until its points lie no further apart than
-# REFINE_RESOLUTION of the parameter's interval (or a quarter of r*'s own interval, if wider).
-REFINE_ROUNDS = 2
-REFINE_POINTS = 8
-REFINE_RESOLUTION = 0.01
-
-
-def _picked_span(points: np.ndarray, ci: tuple[float, float]) -> tuple[int, int]:
-    """The indices of the evaluated points bounding the span r*'s interval could reach: from the
-    point below the interval's lower end to the one above its upper end (a resample may prefer
-    any r between the last point it picked and the next one out)."""
-    i0 = int(np.searchsorted(points, ci[0], side="left")) - 1
-    i1 = int(np.searchsorted(points, ci[1], side="right"))
-    return max(i0, 0), min(i1, points.size - 1)
-
-
-def r_star_interval(ev: Evaluator, groups: np.ndarray, *, of_reference: bool, seed: int,
-                    interval: tuple[float, float]) -> tuple[list[float] | None, float | None, int]:
-    """How far r* would move with other traffic: `argmin_ci` over every point the job evaluated
-    the answer's E at (the sweep's steps, the solve's points, the polish, the figures' and the
-    dense check's), each resample re-picking the point of least E, on points made dense where
-    the picks fall: while the span the interval could reach (`_picked_span`) holds a gap wider
-    than the resolution asked (REFINE_RESOLUTION of `interval`, or a quarter of r*'s interval if
-    that is wider), E is evaluated at REFINE_POINTS more points across it (at most REFINE_ROUNDS
-    times). Returns the interval [lo, hi] (None where it cannot be estimated), its resolution (the
-    widest gap between neighbouring points across that span) and the points' count."""
-    lo, hi = interval
-    rounds = 0
-    while True:
-        points = np.asarray(sorted({x[0] for x in (ev.reference_points() if of_reference else ev.hard_points())}))
-        sums = [ev.scene_sums(r, of_reference) for r in points]
-        if not points.size or any(s is None for s in sums):
-            return None, None, int(points.size)
-        ci = argmin_ci(points, sums, groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
-        if ci is None:
-            return None, None, int(points.size)
-        i0, i1 = _picked_span(points, ci)
-        resolution = float(np.max(np.diff(points[i0:i1 + 1]))) if i1 > i0 else None
-        wanted = max(REFINE_RESOLUTION * (hi - lo), 0.25 * (ci[1] - ci[0]))
-        if resolution is None or resolution <= wanted or rounds == REFINE_ROUNDS:
-            return list(ci), resolution, int(points.size)
-        rounds += 1
-        for r in np.linspace(points[i0], points[i1], REFINE_POINTS + 2)[1:-1]:
-            ev.scene_sums(float(r), of_reference)
 
 
 def line_intervals(ev: Evaluator, result: Any, e_star: float, *, of_reference: bool, seed: int, unit: str,
@@ -198,15 +152,20 @@ def answer_ci(ev: Evaluator, r: Any, *, seed: int, recorded: bool = False,
     return None if out is None else list(out)
 
 
-def box_intervals(ev: Evaluator, x: Any, default: Any, *, of_reference: bool, seed: int,
-                  recorded: bool = False) -> dict[str, Any]:
+def box_intervals(ev: Evaluator, x: Any, default: Any, *, of_reference: bool, seed: int, recorded: bool = False,
+                  bounds: Sequence[tuple[float, float]] | None = None,
+                  offset_at: Callable[[np.ndarray], float] | None = None) -> dict[str, Any]:
     """result.json's interval keys of a many-parameter answer at x: "ci_level", "ci_method",
-    "E_ci" of the answer's E (E_ref under a probabilistic law, else E_hard), "r_star_ci" (null:
-    not estimated for many parameters) and "comparisons": the answer against the default suite
-    (`default`, the sensors' defaults clipped to the box), paired over the same scenes. Evaluates
-    E at the default where the solve did not."""
+    "E_ci" of the answer's E (E_ref under a probabilistic law, else E_hard), "r_star_ci" ({name:
+    [lo, hi]} per parameter along its axis through x, the others held there
+    (`box_r_star_interval`, `bounds` in `ev.objective.names` order, `offset_at(x)` the cost term
+    of J [m]); null without `bounds` or where it cannot be estimated) and "comparisons": the
+    answer against the default suite (`default`, the sensors' defaults clipped to the box),
+    paired over the same scenes. Evaluates E at the default, and along the axes, where the solve
+    did not."""
     groups, weight = strata(ev, recorded)
-    method = _method(estimable(groups, weight), seed, recorded) | {"r_star": "not estimated for a many-parameter answer"}
+    ok = estimable(groups, weight)
+    method = _method(ok, seed, recorded) | {"r_star": "not estimated"}
     e = ev.e_reference if of_reference else ev.e_hard
     sums = (ev.scene_sums(x, of_reference), ev.scene_sums(default, of_reference))
     if any(s is None for s in sums):
@@ -214,7 +173,17 @@ def box_intervals(ev: Evaluator, x: Any, default: Any, *, of_reference: bool, se
         return {"ci_level": LEVEL, "ci_method": method, "E_ci": None, "r_star_ci": None, "comparisons": []}
     ci = bootstrap_ci(sums[0], groups, level=LEVEL, resamples=RESAMPLES, seed=seed)
     against = paired_comparison("r*", "the default suite", e(x), e(default), *sums, groups, seed, of="default")
-    return {"ci_level": LEVEL, "ci_method": method, "E_ci": None if ci is None else list(ci), "r_star_ci": None,
+    r_ci = None
+    if ok and bounds is not None:
+        names = ev.objective.names
+        axes = box_r_star_interval(ev, x, bounds, groups, of_reference=of_reference, seed=seed, offset_at=offset_at)
+        r_ci = {n: a[0] for n, a in zip(names, axes)}
+        caveat = CONDITIONAL_CAVEAT + ("" if of_reference else "; and " + THRESHOLD_CAVEAT)
+        method |= {"r_star": "per parameter, argmin of J along its axis through r* (the others held at r*), "
+                             "made dense where the resamples' picks fall, each resample reweighting the points alike",
+                   "r_star_points": {n: a[2] for n, a in zip(names, axes)},
+                   "r_star_resolution": {n: a[1] for n, a in zip(names, axes)}, "r_star_caveat": caveat}
+    return {"ci_level": LEVEL, "ci_method": method, "E_ci": None if ci is None else list(ci), "r_star_ci": r_ci,
             "comparisons": [against]}
 
 

@@ -22,7 +22,8 @@ from diffsense.solve import (
 )
 from diffsense.study import _line_report as report
 from diffsense.study._domain import domain_check, domain_note
-from diffsense.study._intervals import REFINE_POINTS, REFINE_ROUNDS, breakdown_intervals, line_intervals
+from diffsense.study._intervals import breakdown_intervals, line_intervals
+from diffsense.study._r_star import REFINE_POINTS, REFINE_ROUNDS
 from diffsense.study._judge import judged
 from diffsense.study._objective import objective, scenes_line
 from diffsense.study._problem import Problem, problem_config

@@ -44,7 +44,11 @@ result.json schema (every key always present; non-finite numbers are written as 
                              resolved to them: "ci_method" holds "r_star_points" (how many) and
                              "r_star_resolution" (the widest gap between neighbouring points from
                              the one below the interval to the one above it, parameter units);
-                             null as "E_ci" is, and for a many-parameter answer
+                             null as "E_ci" is. A many-parameter answer's: per parameter, the
+                             same along its axis through r* with the others held at r* (9 points
+                             across its bounds to begin with; the pick is J's, E + lambda x cost),
+                             "r_star_points" and "r_star_resolution" then {name: value}, and
+                             "r_star_caveat" says the interval is conditional on the others
     "comparisons"   [{"a", "b", "diff_m", "ci", "ci_unpaired", "paired", "of", "verdict"}, ...]
                              each sweep step (and r*, where it is no step) against the best step
                              ("of": "sweep"), then, with `--sensor both`, the first sensor's
@@ -61,8 +65,9 @@ result.json schema (every key always present; non-finite numbers are written as 
                      "intervals": {"hard": int, "reference": int}}  compiled-program
                              runs (memoised points are not run again): the solve's, those
                              after it for the figures and the report (a many-parameter answer's
-                             default-suite comparison), and the points evaluated to make r*'s
-                             interval dense (a one-parameter answer)
+                             default-suite comparison), and the points evaluated for r*'s
+                             interval (made dense where the picks fall; a many-parameter
+                             answer's along each parameter's axis)
     "wall_s"        {"compile": s, "run": s, "programs_compiled": n, "programs_lowered": m}
                              (n: programs XLA compiled rather than loaded from the persistent
                              compilation cache; m: programs JAX traced and lowered, compiled or
@@ -292,7 +297,8 @@ class Result:
             "note": "no interval: not computed for a many-parameter solve"}, "E_ci": None, "comparisons": []}
         r_ci = ci.get("r_star_ci")
         return {k: ci[k] for k in ("ci_level", "ci_method", "E_ci")} | {
-            "r_star_ci": None if r_ci is None else {self.param: list(r_ci)}, "comparisons": ci["comparisons"]} | (
+            "r_star_ci": None if r_ci is None else (r_ci if isinstance(r_ci, dict) else {self.param: list(r_ci)}),
+            "comparisons": ci["comparisons"]} | (
             {"target_ci": ci["target_ci"]} if "target_ci" in ci else {})
 
     def _breakdown_of(self) -> dict[str, Any]:

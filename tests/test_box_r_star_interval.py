@@ -1,0 +1,118 @@
+"""How far a many-parameter answer's r* would move with other traffic (`diffsense.study.
+box_r_star_interval`, result.json's "r_star_ci" of a box solve).
+
+- On an objective whose per-variant E^2 is quadratic in each parameter, the axis minimiser of a
+  resample's E is the resample's weighted mean of the variants' optima: the interval equals the
+  percentile interval of those means (the bootstrap's own resamples), to the points' resolution.
+- Each axis holds the others at r*; the points stay in the bounds; variants identical within
+  each scenario collapse every interval to r*'s value; a cost term (lambda x cost) moves the pick.
+- A box solve with several variants per scenario writes one interval per parameter, with the
+  points it took, and prints them beside r*.
+"""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+import pytest
+
+import diffsense as ds
+from diffsense.metrics import LEVEL, SceneSums, argmin_ci, bootstrap_counts, expanded_tail
+from diffsense.metrics import make_objective
+from diffsense.report import box_table
+from diffsense.solve import BoxConfig
+from diffsense.study import box_r_star_interval
+from diffsense.tracks import prediction_frames
+from tests._laws import THRESHOLD
+from tests._toy_pipeline import TOY_GAIN, ToyPredictor, toy_scenes
+
+STRATA = np.repeat([0, 1], 6)
+BOUNDS = [(0.0, 10.0), (-5.0, 5.0)]
+
+
+class _Quadratic:
+    """Variant n's squared error at x: 1 + sum_i a_i (x_i - c_ni)^2 over one instant; E's axis
+    minimiser on a reweighting w is the w-weighted mean of c_ni (its own check)."""
+
+    def __init__(self, optima: np.ndarray, curvature=(1.0, 3.0)):
+        self.optima, self.curvature = np.asarray(optima, np.float64), np.asarray(curvature)
+        self.objective = type("Names", (), {"names": ("a.x", "b.y")})()
+        self.asked: list[tuple[float, ...]] = []
+
+    def scene_sums(self, x, of_reference=True) -> SceneSums:
+        self.asked.append(tuple(np.asarray(x, np.float64)))
+        sq = 1.0 + np.sum(self.curvature * (np.asarray(x) - self.optima) ** 2, axis=1)
+        return SceneSums(sq=sq, instants=np.ones_like(sq), tracked_sq=sq[None], tracked=np.ones_like(sq)[None])
+
+
+def _optima(seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.normal(4.0, 1.0, STRATA.size), rng.normal(-1.0, 0.5, STRATA.size)])
+
+
+def test_each_axis_interval_is_the_bootstrap_interval_of_the_resamples_minimisers():
+    optima = _optima()
+    x = optima.mean(axis=0)  # r* of the sample itself
+    ev = _Quadratic(optima)
+    axes = box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=0)
+    counts = bootstrap_counts(STRATA, seed=0)
+    tail = expanded_tail(STRATA, level=LEVEL)
+    for i, ((lo, hi), resolution, points) in enumerate(axes):
+        means = counts @ optima[:, i] / counts.sum(axis=1)  # each resample's own minimiser
+        want = np.quantile(means, [tail, 1.0 - tail])
+        assert lo <= x[i] <= hi and BOUNDS[i][0] <= lo and hi <= BOUNDS[i][1]
+        # the picks are read outward to evaluated points at most `resolution` apart
+        assert abs(lo - want[0]) <= resolution and abs(hi - want[1]) <= resolution
+        assert resolution < (BOUNDS[i][1] - BOUNDS[i][0]) / 8 / 4 and points > 9  # refined where the picks fall
+    for y in ev.asked:  # every point lies on an axis through r*, in the bounds
+        assert np.sum(~np.isclose(y, x, rtol=0, atol=0)) <= 1
+        assert all(lo <= v <= hi for v, (lo, hi) in zip(y, BOUNDS))
+
+
+def test_identical_variants_collapse_each_interval_to_r_star():
+    optima = np.repeat(_optima()[[0, 6]], 6, axis=0)  # within each scenario, every variant alike
+    x = optima.mean(axis=0)
+    ev = _Quadratic(optima)
+    for (lo, hi), _, _ in box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=3):
+        assert lo == hi
+    assert [a[0] for a in box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=3)] == [
+        [x[0], x[0]], [x[1], x[1]]]
+
+
+def test_a_cost_term_moves_the_pick_to_the_cheap_end():
+    optima = _optima()
+    x = optima.mean(axis=0)
+    plain = box_r_star_interval(_Quadratic(optima), x, BOUNDS, STRATA, of_reference=True, seed=0)
+    priced = box_r_star_interval(_Quadratic(optima), x, BOUNDS, STRATA, of_reference=True, seed=0,
+                                 offset_at=lambda y: 100.0 * y[0])  # a metre of J per 0.01 of a.x
+    assert priced[0][0] == [BOUNDS[0][0], BOUNDS[0][0]] and plain[0][0][0] > BOUNDS[0][0]
+    assert priced[1][0] == plain[1][0]  # the cost does not depend on b.y: its axis is as before
+
+
+def test_argmin_ci_adds_the_offset_before_the_pick():
+    strata = np.array([0, 0, 1, 1])
+    sums = [SceneSums(sq=np.full(4, v), instants=np.ones(4), tracked_sq=np.full((1, 4), v), tracked=np.ones((1, 4)))
+            for v in (4.0, 1.0, 2.25)]  # E 2, 1, 1.5 m
+    assert argmin_ci([10.0, 20.0, 30.0], sums, strata) == (20.0, 20.0)
+    assert argmin_ci([10.0, 20.0, 30.0], sums, strata, offset_m=np.array([0.0, 0.6, 0.0])) == (30.0, 30.0)
+    with pytest.raises(ValueError):
+        argmin_ci([10.0, 20.0, 30.0], sums, strata, offset_m=np.zeros(2))
+
+
+def test_a_box_solve_with_variants_reports_r_star_s_interval_per_parameter():
+    params = {"radar.range_m": (30.0, 200.0), "camera.width_px": (640.0, 3840.0)}
+    problem = ds.Problem(sensor=["radar", "camera"], params=params, scenarios=["sc01"], sensor_config=dict(THRESHOLD),
+                         box=BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3))
+    scenes, scenario = toy_scenes(4)  # two scenarios of two variants each
+    frames = prediction_frames(scenes.num_frames)[:3]
+    E = make_objective(scenes, scenario, frames, problem.sensing.built, ToyPredictor(jax.numpy.asarray(TOY_GAIN)),
+                       names=tuple(problem.params), key=jax.random.key(2, impl="rbg"))
+    content = ds.optimise(problem, E=E).to_json()
+    assert set(content["r_star_ci"]) == set(params)
+    for name, (lo, hi) in content["r_star_ci"].items():
+        assert params[name][0] <= lo <= hi <= params[name][1]
+        assert content["ci_method"]["r_star_points"][name] >= 9
+    assert content["ci_method"]["r_star_caveat"] and content["programs_run"]["intervals"]["hard"] > 0
+    printed = box_table(content)
+    assert "r* with other traffic" in printed
+    assert all(f"[{lo:.4g}, {hi:.4g}]" in printed for lo, hi in content["r_star_ci"].values())
