@@ -22,13 +22,15 @@ def replace_block(markdown: Path, name: str, body: str) -> None:
     markdown.write_text(f"{head}{start}\n{body}\n{end}{rest.split(end, 1)[1]}")
 
 
-def measured_rows(path: Path, render_only: bool, rows: Iterable[Callable[[], dict]]) -> dict:
+def measured_rows(path: Path, render_only: bool, rows: Iterable[Callable[[], dict]], keep: bool = False) -> dict:
     """A results JSON {"rows", "meta"}: read from `path` where `render_only`, otherwise measured
-    row by row (`rows`, each a function returning one), the file rewritten as each row ends so
-    that an interrupted run keeps the rows it finished."""
+    row by row (`rows`, each a function returning one; after the stored rows where `keep`), the
+    file rewritten as each row ends so that an interrupted run keeps the rows it finished."""
     if render_only:
         return json.loads(path.read_text())
     res = {"rows": [], "meta": {"machine": platform.platform(), "cpus": os.cpu_count(), "jax": jax.__version__}}
+    if keep and path.exists():
+        res["rows"] = json.loads(path.read_text())["rows"]
     for row in rows:
         res["rows"].append(row())
         path.parent.mkdir(parents=True, exist_ok=True)

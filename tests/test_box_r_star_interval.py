@@ -1,9 +1,9 @@
 """How far a many-parameter answer's r* would move with other traffic (`diffsense.study.
 box_r_star_interval`, result.json's "r_star_ci" of a box solve).
 
-- On an objective whose per-variant E^2 is quadratic in each parameter, the axis minimiser of a
-  resample's E is the resample's weighted mean of the variants' optima: the interval equals the
-  percentile interval of those means (the bootstrap's own resamples), to the points' resolution.
+- On an objective whose per-variant E^2 is quadratic in each parameter, the minimiser of the
+  population's E is the mean of the variants' optima: over 60 samples each axis's 90 % interval
+  (r* re-picked on each resample, `argmin_ci`) holds it in 80-97 %.
 - Each axis holds the others at r*; the points stay in the bounds; variants identical within
   each scenario collapse every interval to r*'s value; a cost term (lambda x cost) moves the pick.
 - A box solve with several variants per scenario writes one interval per parameter, with the
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import diffsense as ds
-from diffsense.metrics import LEVEL, SceneSums, argmin_ci, bootstrap_counts, expanded_tail
+from diffsense.metrics import SceneSums, argmin_ci
 from diffsense.metrics import make_objective
 from diffsense.report import box_table
 from diffsense.solve import BoxConfig
@@ -50,23 +50,22 @@ def _optima(seed=0) -> np.ndarray:
     return np.column_stack([rng.normal(4.0, 1.0, STRATA.size), rng.normal(-1.0, 0.5, STRATA.size)])
 
 
-def test_each_axis_interval_is_the_bootstrap_interval_of_the_resamples_minimisers():
-    optima = _optima()
-    x = optima.mean(axis=0)  # r* of the sample itself
-    ev = _Quadratic(optima)
-    axes = box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=0)
-    counts = bootstrap_counts(STRATA, seed=0)
-    tail = expanded_tail(STRATA, level=LEVEL)
-    for i, ((lo, hi), resolution, points) in enumerate(axes):
-        means = counts @ optima[:, i] / counts.sum(axis=1)  # each resample's own minimiser
-        want = np.quantile(means, [tail, 1.0 - tail])
-        assert lo <= x[i] <= hi and BOUNDS[i][0] <= lo and hi <= BOUNDS[i][1]
-        # the picks are read outward to evaluated points at most `resolution` apart
-        assert abs(lo - want[0]) <= resolution and abs(hi - want[1]) <= resolution
-        assert resolution < (BOUNDS[i][1] - BOUNDS[i][0]) / 8 / 4 and points > 9  # refined where the picks fall
-    for y in ev.asked:  # every point lies on an axis through r*, in the bounds
-        assert np.sum(~np.isclose(y, x, rtol=0, atol=0)) <= 1
-        assert all(lo <= v <= hi for v, (lo, hi) in zip(y, BOUNDS))
+def test_each_axis_interval_covers_the_population_minimiser_at_about_its_level():
+    # the population minimiser of the quadratic model is the mean of the variants' optima (4, -1)
+    held = []
+    for seed in range(60):
+        optima = _optima(seed)
+        ev = _Quadratic(optima)
+        x = optima.mean(axis=0)  # r* of the sample itself
+        axes = box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=seed)
+        held.append([lo <= truth <= hi for ((lo, hi), _, _), truth in zip(axes, (4.0, -1.0))])
+        for i, ((lo, hi), resolution, points) in enumerate(axes):
+            assert lo <= x[i] <= hi and BOUNDS[i][0] <= lo and hi <= BOUNDS[i][1]
+            assert resolution < (BOUNDS[i][1] - BOUNDS[i][0]) / 8 / 2 and points > 9  # refined where it ends
+        for y in ev.asked:  # every point lies on an axis through r*, in the bounds
+            assert np.sum(y != x) <= 1 and all(lo <= v <= hi for v, (lo, hi) in zip(y, BOUNDS))
+    coverage = np.mean(held, axis=0)
+    assert np.all((0.8 <= coverage) & (coverage <= 0.97)), coverage
 
 
 def test_identical_variants_collapse_each_interval_to_r_star():
