@@ -117,8 +117,8 @@ def table(res: dict) -> str:
             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
         points = "grid, made dense (the job's)" if r.get("refined") else "1-deg grid"
-        rows.append(f"| {r['answer']} | {points} | {r['variants']} | {r['seeds']} | {r['truth']:g} | {100 * r['coverage']:.0f} % | "
-                    f"{100 * r['others_inside']:.0f} % | {r['width_median']:g} | {r['r_star_mean']:.1f} ± {r['r_star_sd']:.1f} | {r['at_grid_end']} |")
+        rows.append(f"| {r['answer']} | {points} | {r['variants']} | {r['seeds']} | {r['truth']:.4g} | {100 * r['coverage']:.0f} % | "
+                    f"{100 * r['others_inside']:.0f} % | {r['width_median']:.3g} | {r['r_star_mean']:.1f} ± {r['r_star_sd']:.1f} | {r['at_grid_end']} |")
     loads = [u.split("load average: ")[-1] for r in res["rows"] for u in r["uptime"]]
     return ("\n".join(rows) + f"\n\n{LEVEL:.0%} intervals, {RESAMPLES} resamples each, seeded by the seed; "
             + "an interval at a grid end might be wider on a wider grid (one that holds the large-sample "
