@@ -6,11 +6,14 @@ box_r_star_interval`, result.json's "r_star_ci" of a box solve).
   (r* re-picked on each resample, `argmin_ci`) holds it in 80-97 %.
 - Each axis holds the others at r*; the points stay in the bounds; variants identical within
   each scenario collapse every interval to r*'s value; a cost term (lambda x cost) moves the pick.
-- A box solve with several variants per scenario writes one interval per parameter, with the
-  points it took, and prints them beside r*.
+- A box solve asked for it (`BoxConfig(r_star_axes=True)`) with several variants per scenario
+  writes one interval per parameter, with the points it took, and prints them beside r*; not
+  asked, it evaluates no axis.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import jax
 import numpy as np
@@ -72,10 +75,8 @@ def test_identical_variants_collapse_each_interval_to_r_star():
     optima = np.repeat(_optima()[[0, 6]], 6, axis=0)  # within each scenario, every variant alike
     x = optima.mean(axis=0)
     ev = _Quadratic(optima)
-    for (lo, hi), _, _ in box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=3):
-        assert lo == hi
-    assert [a[0] for a in box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=3)] == [
-        [x[0], x[0]], [x[1], x[1]]]
+    axes = box_r_star_interval(ev, x, BOUNDS, STRATA, of_reference=True, seed=3)
+    assert [a[0] for a in axes] == [[x[0], x[0]], [x[1], x[1]]]
 
 
 def test_a_cost_term_moves_the_pick_to_the_cheap_end():
@@ -98,15 +99,20 @@ def test_argmin_ci_adds_the_offset_before_the_pick():
         argmin_ci([10.0, 20.0, 30.0], sums, strata, offset_m=np.zeros(2))
 
 
-def test_a_box_solve_with_variants_reports_r_star_s_interval_per_parameter():
+def test_a_box_solve_asked_for_it_reports_r_star_s_interval_per_parameter():
     params = {"radar.range_m": (30.0, 200.0), "camera.width_px": (640.0, 3840.0)}
+    tiny = BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3)
     problem = ds.Problem(sensor=["radar", "camera"], params=params, scenarios=["sc01"], sensor_config=dict(THRESHOLD),
-                         box=BoxConfig(samples=4, starts=1, tau_schedule=(1.0,), max_steps=2, max_soft=3))
+                         box=tiny)
     scenes, scenario = toy_scenes(4)  # two scenarios of two variants each
     frames = prediction_frames(scenes.num_frames)[:3]
     E = make_objective(scenes, scenario, frames, problem.sensing.built, ToyPredictor(jax.numpy.asarray(TOY_GAIN)),
                        names=tuple(problem.params), key=jax.random.key(2, impl="rbg"))
-    content = ds.optimise(problem, E=E).to_json()
+    plain = ds.optimise(problem, E=E).to_json()  # not asked: no axis is evaluated
+    assert plain["r_star_ci"] is None and plain["programs_run"]["intervals"] == {"hard": 0, "reference": 0}
+    assert plain["E_ci"] is not None  # the answer's E still has its interval
+    content = ds.optimise(problem.replace(box=dataclasses.replace(tiny, r_star_axes=True)), E=E).to_json()
+    assert content["r_star"] == plain["r_star"]  # the interval does not move the answer
     assert set(content["r_star_ci"]) == set(params)
     for name, (lo, hi) in content["r_star_ci"].items():
         assert params[name][0] <= lo <= hi <= params[name][1]

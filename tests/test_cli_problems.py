@@ -53,6 +53,8 @@ def test_each_flag_sets_its_field(tmp_path):
     laws = str(ROOT / "configs" / "sensors" / "laws" / "radar_swerling1.toml")
     (law,) = _problems("--sensor-config", laws)
     assert law.sensing.sensor_config == laws
+    (axes,) = _problems("--r-star-axes")
+    assert axes.solver.box.r_star_axes and not _problems()[0].solver.box.r_star_axes
 
 
 def test_a_reference_needs_two_draws_for_its_standard_error():

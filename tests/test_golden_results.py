@@ -34,7 +34,8 @@ points' programs); every other number stayed as stored. ci_method's "r_star_cave
 is a lower bound where r* is chosen on E_hard) was added from the first run that reported it.
 When a many-parameter answer's r* came to have an interval along each parameter's axis, the box
 file's programs_run gained "intervals" (zero: one variant per scenario gives no interval) and its
-ci_method's "r_star" came to read "not estimated"; every other number stayed as stored.
+ci_method's "r_star" came to read "not estimated" (later with how to ask for it); the config's
+box gained "r_star_axes" with its default, false; every other number stayed as stored.
 """
 
 from __future__ import annotations

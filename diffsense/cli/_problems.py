@@ -94,6 +94,7 @@ def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict
     """The `Problem` fields the flags set over the config's (every sensor's problem alike)."""
     from diffsense.config import to_dict
     from diffsense.metrics import EstimatorConfig
+    from diffsense.solve import BoxConfig
 
     fields: dict = {}
     if suite:
@@ -134,6 +135,8 @@ def _flag_fields(args: argparse.Namespace, settings, suite: dict | None) -> dict
     if args.steps:
         fields["steps"] = _number_list(args.steps, "--steps")
     fields["dense_check"] = args.dense_check
+    if getattr(args, "r_star_axes", False):
+        fields["box"] = BoxConfig(r_star_axes=True)
     weather = {k: v for k, v in (("rain_mm_h", args.rain_mm_h), ("fog_visibility_m", args.fog_visibility_m))
                if v is not None}
     if weather:

@@ -72,6 +72,9 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
     p.add_argument("--target-ci", type=float, metavar="M",
                    help="double the variants (from --variants, up to 128) until the decision's interval (best against "
                    "second-best step) has a half-width under M metres or excludes 0; result.json's target_ci says how many")
+    p.add_argument("--r-star-axes", action="store_true",
+                   help="a many-parameter answer: also r*'s interval per parameter, along its axis through r* "
+                   "(up to 25 evaluations of E per parameter)")
     p.add_argument("--model", help="predictor weights (.msgpack of this project or a PyTorch checkpoint)")
     p.add_argument("--profile", choices=("physical", "paper"),
                    help="the sensors' shipped constants: physical (default) or paper (the paper's design)")

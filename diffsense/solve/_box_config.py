@@ -33,6 +33,9 @@ class BoxConfig:
         bound_tol: distance to a bound, relative to the box, within which a parameter is put on it.
         cost_weight: lambda in J = E + lambda * cost [m per currency unit].
         seed: shifts the Halton sample.
+        r_star_axes: the box job also makes r*'s interval per parameter, along its axis through
+            r* (`diffsense.study.box_r_star_interval`): up to 25 evaluations of the answer's E per
+            parameter, as many again as a long solve on a suite's default problem, so off unless asked.
     """
 
     samples: int = 0
@@ -50,6 +53,7 @@ class BoxConfig:
     bound_tol: float = 1e-6
     cost_weight: float = 0.0
     seed: int = 0
+    r_star_axes: bool = False
 
     def __post_init__(self):
         taus = tuple(float(t) for t in self.tau_schedule)

@@ -56,7 +56,8 @@ def _functions(problem: Problem, E: Objective, on_evaluation: OnEvaluation, solv
     screen = None if _on_hard(problem, E) else min(problem.solver.box.screen_draws, E.estimator.reference_draws)
     fns = BoxFunctions.from_evaluator(ev, cost=make_cost(load_costs(problem.question.costs), E.sensor),
                                       e_answer=e_answer, screen_draws=screen)
-    axes = intervals and estimable(*strata(ev, problem.traffic.scenes is not None))  # r*'s interval is made
+    axes = (intervals and problem.solver.box.r_star_axes  # r*'s interval is made
+            and estimable(*strata(ev, problem.traffic.scenes is not None)))
     planned = _planned(problem, screen is not None, solves, axes)
     if on_evaluation is not None:
         def listen(event) -> None:  # what a progress display shows: E, the cost there, the count
@@ -114,11 +115,12 @@ def optimise_box(problem: Problem, E: Objective | None, predictor: Any, say: Say
         star = breakdown_intervals(ev, x, ev.breakdown(x, of_reference=on_ref), of_reference=on_ref,
                                    seed=problem.seed, recorded=recorded)
         parts = {"breakdown": star, "tracked": star["tracked"]}
-        ev.scene_sums(start, on_ref)  # the default suite the answer is compared with: the report's
+        ev.scene_sums(start, on_ref)  # the default suite the answer is compared with: counted in "figures"
         after = {k: ev.counts[k] - solve_counts[k] for k in ev.counts}
         weight, before = problem.question.cost_weight, {"hard": ev.counts["hard"], "reference": ev.reference_count}
         ci = box_intervals(ev, x, start, of_reference=on_ref, seed=problem.seed, recorded=recorded,
-                           bounds=[problem.params[n] for n in E.names], offset_at=lambda y: weight * fns.cost(y)[0])
+                           bounds=[problem.params[n] for n in E.names] if problem.solver.box.r_star_axes else None,
+                           offset_at=lambda y: weight * fns.cost(y)[0])
         interval_counts = {"hard": ev.counts["hard"] - before["hard"], "reference": ev.reference_count - before["reference"]}
         fresh = None
         if judge:

@@ -165,7 +165,9 @@ def box_intervals(ev: Evaluator, x: Any, default: Any, *, of_reference: bool, se
     did not."""
     groups, weight = strata(ev, recorded)
     ok = estimable(groups, weight)
-    method = _method(ok, seed, recorded) | {"r_star": "not estimated"}
+    method = _method(ok, seed, recorded) | {"r_star": "not estimated" + (
+        "" if bounds is not None else ": ask for it (BoxConfig(r_star_axes=True), --r-star-axes), at up to 25 "
+        "evaluations of E per parameter")}
     e = ev.e_reference if of_reference else ev.e_hard
     sums = (ev.scene_sums(x, of_reference), ev.scene_sums(default, of_reference))
     if any(s is None for s in sums):

@@ -44,7 +44,8 @@ result.json schema (every key always present; non-finite numbers are written as 
                              resolved to them: "ci_method" holds "r_star_points" (how many) and
                              "r_star_resolution" (the widest gap between neighbouring points from
                              the one below the interval to the one above it, parameter units);
-                             null as "E_ci" is. A many-parameter answer's: per parameter, the
+                             null as "E_ci" is. A many-parameter answer's (null unless asked
+                             for: `BoxConfig.r_star_axes`, --r-star-axes): per parameter, the
                              same along its axis through r* with the others held at r* (9 points
                              across its bounds to begin with; the pick is J's, E + lambda x cost),
                              "r_star_points" and "r_star_resolution" then {name: value}, and
