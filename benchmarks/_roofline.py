@@ -56,7 +56,8 @@ def matmul_shapes(batch: int, neighbours: int) -> dict[str, tuple[int, int, int]
 
 
 def matmul_rates(batch: int, neighbours: int, repeats: int = 30, torch=None) -> dict[str, dict[str, float]]:
-    """{shape name: {"xla": GFLOP/s, "torch": GFLOP/s}} (best of `repeats`; torch only if given)."""
+    """{shape name: {"xla": GFLOP/s, "xla_bf16": GFLOP/s, "torch": GFLOP/s}} (best of `repeats`;
+    xla_bf16 the same product on bfloat16 operands into a float32 sum; torch only if given)."""
     rng = np.random.default_rng(0)
     out = {}
     for name, (m, k, n) in matmul_shapes(batch, neighbours).items():
@@ -65,6 +66,9 @@ def matmul_rates(batch: int, neighbours: int, repeats: int = 30, torch=None) -> 
         product = jax.jit(jnp.matmul).lower(ja, jb).compile()
         gflop = 2 * m * k * n / 1e9
         out[name] = {"xla": gflop / _best_time(lambda: product(ja, jb).block_until_ready(), repeats)}
+        ha, hb = ja.astype(jnp.bfloat16), jb.astype(jnp.bfloat16)
+        half = jax.jit(lambda x, y: jnp.dot(x, y, preferred_element_type=jnp.float32)).lower(ha, hb).compile()
+        out[name]["xla_bf16"] = gflop / _best_time(lambda: half(ha, hb).block_until_ready(), repeats)
         if torch is not None:
             ta, tb = torch.from_numpy(a), torch.from_numpy(b)
             with torch.no_grad():

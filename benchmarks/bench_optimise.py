@@ -1,14 +1,16 @@
 """The main job's cost: cold and warm runs, the dense-grid baseline, far background traffic.
 
     python benchmarks/bench_optimise.py [--model PATH] [--variants 8] [--scenarios sc01,...]
-        [--skip-cold | --processes-only] [--repeat 1] [--python EXE] [--dense-step 0.5] [--json PATH]
+        [--skip-cold | --processes-only] [--repeat 1] [--python EXE] [--flags "..."] [--dense-step 0.5]
+        [--json PATH]
 
 1. The default command `python -m diffsense.optimise --param hfov --interval 30 180` in fresh
    processes: first with an empty JAX compilation cache (cold), then --repeat times with the
    cache the cold run filled (warm). Target: cold under 90 s on the 2-core reference machine.
    `--python EXE` runs the command with another environment's interpreter, e.g. a virtual
    environment with an older commit installed (`pip install -e` of a `git worktree`), to compare
-   two versions of the main job as whole processes; `--processes-only` stops after this part.
+   two versions of the main job as whole processes; `--flags` adds options to the command (e.g.
+   "--predictor-dtype bfloat16"); `--processes-only` stops after this part.
 2. In one process, on the same objective (`diffsense.objective`): the main job's search
    (`diffsense.optimise` on the built objective, figures off: the stepped sweep and the
    continuous solve, at most 20 objective+gradient evaluations) against a dense hard grid every
@@ -56,10 +58,11 @@ def _describe(repo: Path) -> str:
 
 
 def cold_and_warm(model: str | None, variants: int, scenarios: str | None, repeat: int,
-                  python: str = sys.executable) -> list[dict]:
+                  python: str = sys.executable, flags: str = "") -> list[dict]:
     """Wall time [s] and result.json of the default command in fresh processes: one cold (empty
     compilation cache), then `repeat` warm ones (the cache the cold run filled). `python`: the
-    interpreter whose installed diffsense runs (default: this one)."""
+    interpreter whose installed diffsense runs (default: this one); `flags`: more options of the
+    command, split on spaces."""
     rows = []
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
         env = dict(os.environ, XDG_CACHE_HOME=cache)
@@ -70,6 +73,7 @@ def cold_and_warm(model: str | None, variants: int, scenarios: str | None, repea
             cmd += ["--scenarios", scenarios]
         if model:
             cmd += ["--model", model]
+        cmd += flags.split()
         labels = ["cold (empty compilation cache)"] + [f"warm {i + 1} (cache of the cold run)" for i in range(repeat)]
         for label in labels:
             t0 = time.perf_counter()
@@ -158,6 +162,7 @@ def main() -> None:
     p.add_argument("--repeat", type=int, default=1, help="warm processes after the cold one (default 1)")
     p.add_argument("--python", default=sys.executable,
                    help="interpreter whose installed diffsense the processes of part 1 run (default: this one)")
+    p.add_argument("--flags", default="", help='more options of the timed command, e.g. "--predictor-dtype bfloat16"')
     p.add_argument("--dense-step", type=float, default=0.5, help="spacing of part 2's dense grid [deg]")
     p.add_argument("--json", type=Path, default=None, help="also write every measured number to this file")
     args = p.parse_args()
@@ -166,14 +171,15 @@ def main() -> None:
     print(f"jax {jax.__version__} on {jax.default_backend()}, {os.cpu_count()} CPU cores, "
           f"{platform.processor() or platform.machine()}, variants per scenario {args.variants}"
           + (f", scenarios {args.scenarios}" if args.scenarios else ""))
-    measured: dict = {"variants": args.variants, "scenarios": args.scenarios}
+    measured: dict = {"variants": args.variants, "scenarios": args.scenarios, "flags": args.flags}
 
     if not args.skip_cold:
         where = subprocess.run([args.python, "-c", "import importlib.util as u, pathlib; print(pathlib.Path(u.find_spec('diffsense').origin).parents[1])"],
                                capture_output=True, text=True, check=True, timeout=300).stdout.strip()
         measured["repo"] = f"{args.python}: {_describe(Path(where))}"
         print(f"\n1. the default command in a fresh process, diffsense from {measured['repo']}")
-        measured["processes"] = cold_and_warm(args.model, args.variants, args.scenarios, args.repeat, args.python)
+        measured["processes"] = cold_and_warm(args.model, args.variants, args.scenarios, args.repeat, args.python,
+                                              args.flags)
         print_processes(measured["processes"])
 
     if not args.processes_only:

@@ -19,6 +19,9 @@ the grid, one decode per manoeuvre) with the same weights (`_torch_reference.py`
 - input gradient: d(sum of the predicted means)/d(inputs): JAX w.r.t. the target and neighbour
   histories and the occupancy weights, PyTorch w.r.t. the histories with its parameters frozen
   (so neither side forms weight gradients).
+- bf16 products: the same two with the LSTMs' products on bfloat16 operands into float32 sums
+  (`--predictor-dtype bfloat16`), against PyTorch's float32 call: a speed bought with accuracy,
+  not parity (the predicted means' max |diff| from float32 is printed).
 Times are medians over --repeats rounds after a warm-up; every round calls each function once, in
 a shuffled order, after a short pause (--pause-ms) so that neither library's idle worker threads
 are still spinning when the other one starts; all calls see the same background load. The JAX
@@ -38,6 +41,7 @@ per forward product).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -70,7 +74,10 @@ OPS = {  # row key -> label
     "forward": "forward",
     "all_modes": "all 6 modes",
     "gradient": "input gradient",
+    "forward_bf16": "forward, bf16 products",
+    "gradient_bf16": "input gradient, bf16 products",
 }
+TORCH_OP = {"all_modes": "forward", "forward_bf16": "forward", "gradient_bf16": "gradient"}  # the torch call compared
 
 
 def _inputs(b: int, n: int, seed: int = 0):
@@ -113,9 +120,12 @@ def _jax_fns(predictor: CSLSTMPredictor, args):
     def all_modes(p, hist, nbr_hist, slot, weight):
         return predict_model_frame(p, si_to_model(hist), si_to_model(nbr_hist), slot, weight)
 
+    fast = dataclasses.replace(predictor, product_dtype="bfloat16")
     jobs = {
         "forward": (predict_mean, (predictor, hist, nbr_hist, slot, weight)),
         "gradient": (jax.grad(loss, argnums=(0, 1, 2)), (hist, nbr_hist, weight, predictor, slot)),
+        "forward_bf16": (predict_mean, (fast, hist, nbr_hist, slot, weight)),
+        "gradient_bf16": (jax.grad(loss, argnums=(0, 1, 2)), (hist, nbr_hist, weight, fast, slot)),
     }
     if predictor.maneuvers:
         jobs["all_modes"] = (all_modes, (predictor, hist, nbr_hist, slot, weight))
@@ -150,8 +160,8 @@ def _measure(batch: int, neighbours: int, predictors, args, torch) -> dict:
     load0 = os.getloadavg()
     print(f"\nCS-LSTM, B = {batch}, {neighbours} neighbours per target, float32, CPU "
           f"({os.cpu_count()} cores); median of {args.repeats} interleaved rounds")
-    print(f"{'variant':<10} {'op':<15} {'jax [ms]':>9} {'torch [ms]':>11} {'speed-up':>9} {'jax compile [s]':>16}")
-    rows, times = [], []
+    print(f"{'variant':<10} {'op':<29} {'jax [ms]':>9} {'torch [ms]':>11} {'speed-up':>9} {'jax compile [s]':>16}")
+    rows, times, bf16_max_diff = [], [], {}
     for predictor in predictors:
         name = "manoeuvre" if predictor.maneuvers else "single"
         fns, compile_s = _jax_fns(predictor, inputs)
@@ -168,14 +178,18 @@ def _measure(batch: int, neighbours: int, predictors, args, torch) -> dict:
         for op, label in OPS.items():
             if f"jax_{op}" not in t:
                 continue
-            t_jax, t_torch = t[f"jax_{op}"], t.get(f"torch_{'forward' if op == 'all_modes' else op}")
+            t_jax, t_torch = t[f"jax_{op}"], t.get(f"torch_{TORCH_OP.get(op, op)}")
             torch_txt = f"{1e3 * t_torch:11.1f}" if t_torch else f"{'-':>11}"
             speedup = f"{t_torch / t_jax:8.1f}x" if t_torch else f"{'-':>9}"
-            print(f"{name:<10} {label:<15} {1e3 * t_jax:9.1f} {torch_txt} {speedup} {compile_s[op]:16.1f}")
+            print(f"{name:<10} {label:<29} {1e3 * t_jax:9.1f} {torch_txt} {speedup} {compile_s[op]:16.1f}")
             rows.append({"variant": name, "op": op, "jax_ms": 1e3 * t_jax,
                          "torch_ms": None if t_torch is None else 1e3 * t_torch, "jax_compile_s": compile_s[op]})
         if agree is not None:
             print(f"{'':<10} (torch vs jax predicted mean: max |diff| = {agree:.2e} m)")
+        bf16_diff = float(np.max(np.abs(np.asarray(jax.jit(predict_mean)(dataclasses.replace(predictor, product_dtype="bfloat16"), *inputs))
+                                        - np.asarray(jax.jit(predict_mean)(predictor, *inputs)))))
+        print(f"{'':<10} (bf16 products vs float32 predicted mean: max |diff| = {bf16_diff:.2e} m)")
+        bf16_max_diff[name] = bf16_diff
     roofline = _print_roofline(batch, neighbours, times, torch)
     load1 = os.getloadavg()
     print(f"load average (1, 5, 15 min): before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, "
@@ -184,6 +198,7 @@ def _measure(batch: int, neighbours: int, predictors, args, torch) -> dict:
         print("warning: the machine was busy. PyTorch's OpenMP workers slow down far more than XLA's "
               "under contention, so the speed-ups above overstate a quiet machine's.")
     return {"batch": batch, "neighbours": neighbours, "repeats": args.repeats, "rows": rows, "roofline": roofline,
+            "bf16_max_diff_m": bf16_max_diff,
             "load_before": load0[0], "load_after": load1[0]}
 
 
@@ -251,8 +266,8 @@ def table(res: dict) -> list[str]:
     for run in res["runs"]:
         gflop = run["roofline"]["forward_gflop"]
         for row in run["rows"]:
-            t_torch = row["torch_ms"] if row["op"] != "all_modes" else next(
-                (r["torch_ms"] for r in run["rows"] if r["variant"] == row["variant"] and r["op"] == "forward"), None)
+            t_torch = row["torch_ms"] if row["op"] not in TORCH_OP else next(
+                (r["torch_ms"] for r in run["rows"] if r["variant"] == row["variant"] and r["op"] == TORCH_OP[row["op"]]), None)
             rate = f"{gflop / (row['jax_ms'] / 1e3):.0f}" if row["op"] == "forward" else ""
             torch_txt = "-" if t_torch is None else f"{t_torch:.1f}"
             speedup = "-" if t_torch is None else f"{t_torch / row['jax_ms']:.1f}x"
@@ -262,18 +277,23 @@ def table(res: dict) -> list[str]:
 
 
 def render_body(res: dict) -> str:
-    rates = ["| B | product | m x k x n | XLA [GFLOP/s] | PyTorch [GFLOP/s] |", "|---|---|---|---|---|"]
+    rates = ["| B | product | m x k x n | XLA [GFLOP/s] | XLA, bf16 operands [GFLOP/s] | PyTorch [GFLOP/s] |",
+             "|---|---|---|---|---|---|"]
     for run in res["runs"]:
         for name, r in run["roofline"]["matmul"].items():
             m, k, n = r["shape"]
             torch_txt = "-" if r.get("torch") is None else f"{r['torch']:.0f}"
-            rates.append(f"| {run['batch']} | {name} | {m} x {k} x {n} | {r['xla']:.0f} | {torch_txt} |")
+            bf16_txt = "-" if r.get("xla_bf16") is None else f"{r['xla_bf16']:.0f}"
+            rates.append(f"| {run['batch']} | {name} | {m} x {k} x {n} | {r['xla']:.0f} | {bf16_txt} | {torch_txt} |")
+    diffs = "; ".join(f"B = {run['batch']}: " + ", ".join(f"{v} {d:.3f} m" for v, d in run["bf16_max_diff_m"].items())
+                      for run in res["runs"] if run.get("bf16_max_diff_m"))
     meta = res["meta"]
     src = (f" B = {meta['pipeline_batch']} is the pipeline's own batch: {meta['pipeline_batch_source']}."
            if meta.get("pipeline_batch") else "")
     return "\n".join(table(res) + ["", f"Medians of `rounds` interleaved rounds on {meta['cpus']} cores "
                                        f"(jax {meta['jax']}, torch {meta['torch']}); `load` is the 1-minute load "
-                                       f"average before and after each batch's run.{src}", "",
+                                       f"average before and after each batch's run.{src}"
+                                       + (f" The bf16 rows' predicted means differ from float32's by at most: {diffs}." if diffs else ""), "",
                                        "The float32 matmul rates of the network's own products on the same "
                                        "machine (best of 30):", ""] + rates)
 
@@ -281,13 +301,13 @@ def render_body(res: dict) -> str:
 def _print_roofline(batch: int, neighbours: int, rows, torch) -> dict:
     rates = matmul_rates(batch, neighbours, torch=torch)
     print("\nroofline: float32 matmul rates on this machine (best of 30) [GFLOP/s]")
-    print(f"{'shape':<13} {'m x k x n':>18} {'xla':>7} {'torch':>7}")
+    print(f"{'shape':<13} {'m x k x n':>18} {'xla':>7} {'torch':>7} {'xla, bf16 operands':>19}")
     shapes = matmul_shapes(batch, neighbours)
     for shape, (m, k, n) in shapes.items():
         r = rates[shape]
         torch_txt = f"{r['torch']:7.0f}" if "torch" in r else f"{'-':>7}"
-        print(f"{shape:<13} {f'{m} x {k} x {n}':>18} {r['xla']:7.0f} {torch_txt}")
-    best = max(v for r in rates.values() for v in r.values())
+        print(f"{shape:<13} {f'{m} x {k} x {n}':>18} {r['xla']:7.0f} {torch_txt} {r['xla_bf16']:19.0f}")
+    best = max(v for r in rates.values() for name, v in r.items() if name != "xla_bf16")  # float32's
     gflop = forward_gflop(batch, neighbours)
     for name, t in rows:
         line = f"{name}: forward {gflop:.2f} GFLOP, jax {gflop / t['jax_forward']:.0f} GFLOP/s"

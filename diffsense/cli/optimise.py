@@ -80,9 +80,10 @@ def _parser(prog: str = PROG) -> argparse.ArgumentParser:
                    help="the sensors' shipped constants: physical (default) or paper (the paper's design)")
     p.add_argument("--sensor-config", metavar="FILE", help="TOML of sensor constants (any subset) replacing the profile's")
     p.add_argument("--fill", choices=("zero", "hold", "interp"), help="missing-detection policy (default: the profile's)")
-    p.add_argument("--predictor-dtype", choices=("auto", "float32", "float64"),
+    p.add_argument("--predictor-dtype", choices=("auto", "float32", "float64", "bfloat16"),
                    help="the predictor's arithmetic inside the float64 E(r) (default auto: the CS-LSTM in float32, "
-                        "its weights' own precision, at half the cost; docs: speed and accuracy)")
+                        "its weights' own precision, at half the cost; bfloat16: float32 with the LSTM products on "
+                        "bfloat16 operands, faster again; docs: speed and accuracy)")
     p.add_argument("--estimator", choices=ESTIMATORS,
                    help="how detection uncertainty enters (auto, under a probabilistic detection law: straight-through "
                         "for one parameter, relaxed-reference for several; mean-field under the threshold law; "

@@ -54,7 +54,9 @@ class CSLSTMPredictor:
 
     Implements `Predictor`: `predictor(inputs)` is `predict_mean` on the inputs (the most
     probable manoeuvre). `maneuvers` is True for the manoeuvre-based variant (6 modes), False
-    for single-mode.
+    for single-mode. `product_dtype` "bfloat16" runs the LSTMs' matrix products on bfloat16
+    operands into float32 sums (`with_compute_dtype(predictor, "bfloat16")`); None keeps every
+    product in the inputs' precision.
     """
 
     spec: ClassVar[InputSpec] = CSLSTM_SPEC
@@ -63,6 +65,7 @@ class CSLSTMPredictor:
     graphdef: nnx.GraphDef = dataclasses.field(metadata=dict(static=True))
     maneuvers: bool = dataclasses.field(metadata=dict(static=True))
     validation_rmse_m: tuple[float, ...] | None = dataclasses.field(default=None, metadata=dict(static=True))
+    product_dtype: str | None = dataclasses.field(default=None, metadata=dict(static=True))
 
     @classmethod
     def from_model(cls, model: CSLSTM, validation_rmse_m: tuple[float, ...] | None = None) -> CSLSTMPredictor:
@@ -77,11 +80,20 @@ class CSLSTMPredictor:
         return predict_mean(self, inputs.hist, inputs.nbr_hist, inputs.nbr_slot, inputs.nbr_weight)
 
     def model(self, dtype=None) -> CSLSTM:
-        """The network (parameters cast to `dtype` when given); usable inside jit."""
+        """The network (parameters cast to `dtype` when given, then the LSTMs' matrices to
+        `product_dtype` when set); usable inside jit."""
         state = self.state
         if dtype is not None:
             state = jax.tree.map(lambda p: p.astype(dtype), state)
+        if self.product_dtype is not None:
+            state = jax.tree_util.tree_map_with_path(
+                lambda path, p: p.astype(self.product_dtype) if _is_lstm_matrix(path) else p, state)
         return nnx.merge(self.graphdef, state)
+
+
+def _is_lstm_matrix(path) -> bool:
+    """Whether a state leaf's key path names an LSTM's w_ih or w_hh (the products' weights)."""
+    return any(getattr(k, "key", None) in ("w_ih", "w_hh") for k in path)
 
 
 def init_predictor(maneuvers: bool = False, seed: int = 0) -> CSLSTMPredictor:

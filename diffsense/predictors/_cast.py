@@ -6,6 +6,11 @@ arithmetic inside it adds only rounding digits, at about twice the cost on a CPU
 `with_compute_dtype(predictor, "float32")` casts the inputs down, runs the predictor, and casts
 its output back up; the gradient flows through both casts (the cast's derivative is the
 identity), so E and dE/dr keep float64 everywhere except inside the network.
+
+"bfloat16" is float32 arithmetic whose LSTM matrix products take bfloat16 operands into float32
+sums (the mixed precision accelerators train in): the products, most of a CS-LSTM pass, run at
+about twice float32's rate on a CPU with AVX512-BF16. Its operands keep 8 significant bits, so
+predictions move by centimetres (a speed the user buys with accuracy: docs/speed-accuracy.md).
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from jaxtyping import Array, Float
 
 from diffsense.tracks import InputSpec, PredictorInputs
 
-COMPUTE_DTYPES = ("float32", "float64")
+COMPUTE_DTYPES = ("float32", "float64", "bfloat16")
 
 
 @jax.tree_util.register_dataclass
@@ -29,7 +34,8 @@ class CastPredictor:
 
     Attributes:
         inner: any `Predictor` (its parameters stay pytree leaves).
-        dtype: the float dtype inside the predictor, "float32" or "float64".
+        dtype: the float dtype inside the predictor, "float32" or "float64", or "bfloat16"
+            (float32 with bfloat16 products: `inner` is a CS-LSTM whose `product_dtype` says so).
     """
 
     inner: Any
@@ -47,18 +53,25 @@ class CastPredictor:
     def __call__(self, inputs: PredictorInputs) -> Float[Array, "B F 2"]:
         out_dtype = inputs.hist.dtype
 
+        inside = "float32" if self.dtype == "bfloat16" else self.dtype
+
         def cast(a):
-            return a.astype(self.dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a
+            return a.astype(inside) if jnp.issubdtype(a.dtype, jnp.floating) else a
 
         return self.inner(jax.tree.map(cast, inputs)).astype(out_dtype)
 
 
 def with_compute_dtype(predictor: Any, dtype: str | None) -> Any:
-    """`predictor` computing in `dtype` ("float32" or "float64"); None or a predictor already
-    computing in it returns it unchanged (never two casts deep)."""
+    """`predictor` computing in `dtype` ("float32", "float64" or "bfloat16"); None returns it
+    unchanged, and a predictor already cast is re-cast from its inner one (never two casts deep).
+    "bfloat16" needs a CS-LSTM (its LSTM products are what it changes)."""
     if dtype is None:
         return predictor
     if dtype not in COMPUTE_DTYPES:
         raise ValueError(f"predictor dtype must be one of {', '.join(COMPUTE_DTYPES)}, got {dtype!r}")
     inner = predictor.inner if isinstance(predictor, CastPredictor) else predictor
+    if hasattr(inner, "product_dtype"):
+        inner = dataclasses.replace(inner, product_dtype="bfloat16" if dtype == "bfloat16" else None)
+    elif dtype == "bfloat16":
+        raise ValueError(f"bfloat16 products are a CS-LSTM's; {type(inner).__name__} has none")
     return CastPredictor(inner=inner, dtype=dtype)

@@ -38,6 +38,7 @@ from diffsense.predictors._lstm_cell import (
     Gates,
     cell_step,
     leaky_relu,
+    product,
     split_gates,
     unrolled,
 )
@@ -99,7 +100,7 @@ def _bwd(steps, last_only, res, dhs):
         dh_t, xt, hp, cp, t = xs
         t = gates(xt, hp) if t is None else t
         dz, dc_prev = _gate_grads(dh_next if dh_t is None else dh_next + dh_t, dc_next, t, c, cp, hidden)
-        back = dz @ w_back
+        back = product(dz, w_back)
         if repeated:
             return (back, dc_prev, cp, dz_sum + dz), (dz, None, None)
         d_in = back[:, hidden:]  # dL/d(LSTM input at t)
@@ -114,12 +115,13 @@ def _bwd(steps, last_only, res, dhs):
     init = (dhs, zeros, c_last, dz0) if last_only else (zeros, zeros, c_last, dz0)
     xs = (None if last_only else dhs, None if repeated else x, None if ts is not None else h_prev, c_prev, ts)
     (_, _, _, dz_sum), (dzs, dx, d_pre) = jax.lax.scan(step, init, xs, reverse=True)
-    dw_hh = jnp.einsum("tnh,tng->hg", h_prev, dzs)
+    # A weight's cotangent in its own dtype (a bfloat16 matrix's, for the "bfloat16" products)
+    dw_hh = jnp.einsum("tnh,tng->hg", h_prev, dzs).astype(w_hh.dtype)
     if repeated:
-        return dz_sum @ w_ih.T, None, x.T @ dz_sum, dw_hh, dz_sum.sum(0)
+        return product(dz_sum, w_ih.T), None, (x.T @ dz_sum).astype(w_ih.dtype), dw_hh, dz_sum.sum(0)
     inputs = x if emb is None else jax.vmap(gates.input)(x)
     d_emb = None if emb is None else (jnp.einsum("tnd,tni->di", x, d_pre), d_pre.sum((0, 1)))
-    return dx, d_emb, jnp.einsum("tni,tng->ig", inputs, dzs), dw_hh, dzs.sum((0, 1))
+    return dx, d_emb, jnp.einsum("tni,tng->ig", inputs, dzs).astype(w_ih.dtype), dw_hh, dzs.sum((0, 1))
 
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))

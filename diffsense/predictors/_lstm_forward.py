@@ -35,6 +35,7 @@ from diffsense.predictors._lstm_cell import (
     Gates,
     halve_ifo,
     leaky_relu,
+    product,
     split_gates,
     unrolled,
 )
@@ -83,9 +84,9 @@ def _step_tangent(t, dz, c, dc, hidden):
 def _stacked(a, da, w):
     """(a @ w, da @ w): one product of the stacked rows when they are few, else two."""
     if a.shape[0] >= STACK_ROWS:
-        return a @ w, da @ w
+        return product(a, w), product(da, w)
     n = a.shape[0]
-    both = jnp.concatenate([a, da], 0) @ w
+    both = product(jnp.concatenate([a, da], 0), w)
     return both[:n], both[n:]
 
 
@@ -98,7 +99,7 @@ def _weight_tangents(weights, tangents, hidden):
 
 def _repeated_jvp(steps, x, dx, gates, w_ih, dweights, last_only):
     n, hidden = x.shape[0], gates.hidden
-    dxw = _materialise(dx, x) @ halve_ifo(w_ih, hidden)
+    dxw = product(_materialise(dx, x), halve_ifo(w_ih, hidden))
     if dweights is not None:
         dxw = dxw + x @ dweights[0] + dweights[2]
 

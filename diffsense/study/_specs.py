@@ -237,9 +237,11 @@ class PredictionSpec:
     Attributes:
         predictor: "" for the shipped CS-LSTM weights, a weight/checkpoint path, or any object
             implementing `diffsense.predictors.Predictor`.
-        predictor_dtype: the float type the predictor computes in: "float32", "float64", or
-            "auto": float32 for the CS-LSTM, whose weights are float32 and which costs half as
-            much in float32 on a CPU; E's own type for any other predictor. Its inputs and
+        predictor_dtype: the float type the predictor computes in: "float32", "float64",
+            "bfloat16" (the CS-LSTM in float32 with its LSTM products on bfloat16 operands:
+            faster, predictions centimetres off), or "auto": float32 for the CS-LSTM, whose
+            weights are float32 and which costs half as much in float32 on a CPU; E's own type
+            for any other predictor. Its inputs and
             output stay in E's type, so E and dE/dr keep float64 around it
             (`diffsense.predictors.with_compute_dtype`).
         float64: compute E(r) in float64 (enables JAX's x64 mode when needed).
@@ -254,7 +256,7 @@ class PredictionSpec:
 
     def __post_init__(self):
         if self.predictor_dtype not in ("auto", *COMPUTE_DTYPES):
-            raise InputError(f"predictor_dtype must be auto, {' or '.join(COMPUTE_DTYPES)}, got {self.predictor_dtype!r}")
+            raise InputError(f"predictor_dtype must be auto, {', '.join(COMPUTE_DTYPES)}, got {self.predictor_dtype!r}")
         if self.predictor_dtype == "float64" and not self.float64:
             raise InputError("predictor_dtype float64 needs float64 = true (a float32 E cannot carry its digits)")
         if self.fill not in FILL_POLICIES:
