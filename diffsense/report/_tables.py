@@ -240,7 +240,7 @@ def box_table(result: Mapping[str, Any]) -> str:
         lines.append(f"{result['ci_level']:.0%} interval on the answer's E from the scene sample: {_ci(result['E_ci'])} m")
     if r_ci:
         lines.append("r* with other traffic: each parameter re-picked along its axis through r*, the others held "
-                     "there (conditional, and narrower than its level where measured: docs/uncertainty.md)"
+                     "there (conditional: read one parameter at a time, not as a joint region; docs/uncertainty.md)"
                      + ("; a lower bound, r* chosen on E_hard" if not _on_ref(result) else ""))
     lines += [c['verdict'] for c in result.get("comparisons") or []
               if c.get("of") == "default"]

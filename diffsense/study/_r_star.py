@@ -30,8 +30,8 @@ REFINE_RESOLUTION = 0.01
 AXIS_POINTS = 9  # each axis of a many-parameter answer to begin with: its bounds and 7 between
 
 CONDITIONAL_CAVEAT = ("conditional: each parameter's interval holds the others at r*, so it leaves out how they would "
-                      "move with it; and narrower than its level: on a two-parameter radar problem the intervals held "
-                      "the large-sample r* in 67-90 % of seeds, both at once in 60-63 % (docs/uncertainty.md)")
+                      "move with it; read them one at a time, not as a joint region: on a two-parameter radar problem "
+                      "each held the large-sample r* in 77-87 % of seeds, both at once in 67-70 % (docs/uncertainty.md)")
 
 Interval = tuple[list[float] | None, float | None, int]
 
