@@ -147,10 +147,10 @@ def test_bfloat16_products_give_finite_gradients_near_the_float32_ones():
     g32, g16 = (np.asarray(jax.jit(jax.grad(total, argnums=1))(p, x.hist)) for p in (f32, b16))
     assert np.all(np.isfinite(g16)) and np.linalg.norm(g16 - g32) < 0.05 * np.linalg.norm(g32)
     tangent = jnp.zeros_like(x.hist).at[:, -1, 1].set(1.0)  # move each target's last point forward
-    with ds.predictors.forward_mode():
-        t32, t16 = (np.asarray(jax.jvp(lambda h, p=p: total(p, h), (x.hist,), (tangent,))[1]) for p in (f32, b16))
+    with ds.predictors.forward_mode():  # float32's forward mode is reverse mode's (tests/test_forward_mode.py)
+        t16 = float(jax.jvp(lambda h: total(b16, h), (x.hist,), (tangent,))[1])
     want = float(np.sum(g32 * np.asarray(tangent)))
-    assert np.isfinite(t16) and abs(t32 - want) < 1e-4 * abs(want) and abs(t16 - want) < 0.05 * abs(want)
+    assert np.isfinite(t16) and abs(t16 - want) < 0.05 * abs(want)
 
 
 @pytest.fixture(scope="module")
