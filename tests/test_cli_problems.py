@@ -55,6 +55,8 @@ def test_each_flag_sets_its_field(tmp_path):
     assert law.sensing.sensor_config == laws
     (axes,) = _problems("--r-star-axes")
     assert axes.solver.box.r_star_axes and not _problems()[0].solver.box.r_star_axes
+    (fast,) = _problems("--predictor-dtype", "bfloat16")
+    assert fast.prediction.predictor_dtype == "bfloat16"
 
 
 def test_a_reference_needs_two_draws_for_its_standard_error():
