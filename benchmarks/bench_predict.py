@@ -186,8 +186,7 @@ def _measure(batch: int, neighbours: int, predictors, args, torch) -> dict:
                          "torch_ms": None if t_torch is None else 1e3 * t_torch, "jax_compile_s": compile_s[op]})
         if agree is not None:
             print(f"{'':<10} (torch vs jax predicted mean: max |diff| = {agree:.2e} m)")
-        bf16_diff = float(np.max(np.abs(np.asarray(jax.jit(predict_mean)(dataclasses.replace(predictor, product_dtype="bfloat16"), *inputs))
-                                        - np.asarray(jax.jit(predict_mean)(predictor, *inputs)))))
+        bf16_diff = float(np.max(np.abs(np.asarray(fns["forward_bf16"]()) - np.asarray(fns["forward"]()))))
         print(f"{'':<10} (bf16 products vs float32 predicted mean: max |diff| = {bf16_diff:.2e} m)")
         bf16_max_diff[name] = bf16_diff
     roofline = _print_roofline(batch, neighbours, times, torch)

@@ -52,12 +52,15 @@ def _predictor(prediction: PredictionSpec):
 def _in_dtype(predictor: Any, predictor_dtype: str, dtype) -> Any:
     """The predictor computing in `predictor_dtype` ("auto": the CS-LSTM in float32, the precision
     of its weights; any other predictor in E's own `dtype`)."""
-    inner = predictor.inner if isinstance(predictor, CastPredictor) else predictor
-    if predictor_dtype == "bfloat16" and not isinstance(inner, CSLSTMPredictor):
-        raise InputError(f"predictor_dtype bfloat16 is the CS-LSTM's (its LSTM products); {type(inner).__name__} has none")
     if predictor_dtype == "auto":
+        inner = predictor.inner if isinstance(predictor, CastPredictor) else predictor
         predictor_dtype = "float32" if isinstance(inner, CSLSTMPredictor) else jnp.dtype(dtype).name
-    return with_compute_dtype(predictor, predictor_dtype) if predictor_dtype != jnp.dtype(dtype).name else predictor
+    if predictor_dtype == jnp.dtype(dtype).name:
+        return predictor
+    try:
+        return with_compute_dtype(predictor, predictor_dtype)
+    except ValueError as e:  # bfloat16 asked of a predictor without LSTM products
+        raise InputError(f"predictor_dtype: {e}") from None
 
 
 @functools.lru_cache(maxsize=4)
